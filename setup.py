@@ -1,0 +1,30 @@
+"""ament_python build of idpose_ros: three Python packages, config, launch files and the ament marker."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "idpose_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=["idpose_core*", "msg_adapters*", "idpose_ros*"]),
+    package_data={"idpose_core": ["assets/*"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="idpose_ros developers",
+    maintainer_email="idpose-ros@example.com",
+    description="Sparse-view camera pose estimation by inverting Zero-1-to-3 (ID-Pose) as a ROS 2 node.",
+    license="MIT",
+    entry_points={
+        "console_scripts": [
+            "estimator = idpose_ros.estimator_node:main",
+        ],
+    },
+)

@@ -1,0 +1,53 @@
+"""The package builds with colcon as ament_python and installs what `ros2 run` needs."""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+COLCON = Path(sys.executable).with_name("colcon")
+
+
+def colcon(*args: str, cwd: Path) -> str:
+    result = subprocess.run(
+        [str(COLCON), *args], cwd=cwd, capture_output=True, text=True, timeout=600,
+        env={**os.environ, "COLCON_LOG_PATH": str(cwd / "log")},
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    return result.stdout
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory) -> Path:
+    """A colcon workspace with this repository as its only package, built as a user builds it."""
+    ws = tmp_path_factory.mktemp("ws")
+    src = ws / "src" / "idpose_ros"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".venv", ".git", "build", "install", "log",
+                                                             "__pycache__", ".pytest_cache", ".hypothesis"))
+    colcon("build", "--packages-select", "idpose_ros", cwd=ws)
+    return ws
+
+
+def test_colcon_sees_an_ament_python_package(tmp_path):
+    listing = colcon("list", "--base-paths", str(ROOT), cwd=tmp_path)
+    assert "idpose_ros" in listing and "(ros.ament_python)" in listing
+
+
+def test_ros2_run_finds_the_estimator(workspace):
+    """What `ros2 run idpose_ros estimator` does: ament index -> prefix -> lib/idpose_ros/estimator."""
+    script = (
+        f". {workspace / 'install' / 'setup.sh'} && {sys.executable} -c "
+        "'from ament_index_python.packages import get_package_prefix, get_package_share_directory;"
+        "print(get_package_prefix(\"idpose_ros\")); print(get_package_share_directory(\"idpose_ros\"))'"
+    )
+    out = subprocess.run(["bash", "-c", script], capture_output=True, text=True, check=True).stdout.split()
+    prefix, share = Path(out[0]), Path(out[1])
+    assert prefix == workspace / "install" / "idpose_ros"
+    executable = prefix / "lib" / "idpose_ros" / "estimator"
+    assert executable.is_file() and os.access(executable, os.X_OK)
+    assert (share / "package.xml").is_file()
+    assert sorted(p.name for p in (share / "config").glob("*.yaml")) == sorted(
+        p.name for p in (ROOT / "config").glob("*.yaml"))
