@@ -29,10 +29,12 @@ def _as_array(x) -> np.ndarray | torch.Tensor:
 
 
 def wrap_azimuth(azimuth: Array) -> Array:
-    """Azimuth into [0, 2pi)."""
+    """Azimuth into [0, 2pi) (a tiny negative angle's remainder rounds up to 2pi; that one wraps to ~0)."""
     if isinstance(azimuth, torch.Tensor):
-        return torch.remainder(azimuth, TWO_PI)
-    return np.mod(azimuth, TWO_PI)
+        wrapped = torch.remainder(azimuth, TWO_PI)
+        return torch.where(wrapped >= TWO_PI, wrapped - TWO_PI, wrapped)
+    wrapped = np.mod(azimuth, TWO_PI)
+    return wrapped - TWO_PI * (wrapped >= TWO_PI)
 
 
 def invert(pose: Array) -> Array:
