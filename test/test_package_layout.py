@@ -1,37 +1,13 @@
 """The package builds with colcon as ament_python and installs what `ros2 run` needs."""
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
-COLCON = Path(sys.executable).with_name("colcon")
 
 
-def colcon(*args: str, cwd: Path) -> str:
-    result = subprocess.run(
-        [str(COLCON), *args], cwd=cwd, capture_output=True, text=True, timeout=600,
-        env={**os.environ, "COLCON_LOG_PATH": str(cwd / "log")},
-    )
-    assert result.returncode == 0, result.stdout + result.stderr
-    return result.stdout
-
-
-@pytest.fixture(scope="module")
-def workspace(tmp_path_factory) -> Path:
-    """A colcon workspace with this repository as its only package, built as a user builds it."""
-    ws = tmp_path_factory.mktemp("ws")
-    src = ws / "src" / "idpose_ros"
-    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".venv", ".git", "build", "install", "log",
-                                                             "__pycache__", ".pytest_cache", ".hypothesis"))
-    colcon("build", "--packages-select", "idpose_ros", cwd=ws)
-    return ws
-
-
-def test_colcon_sees_an_ament_python_package(tmp_path):
+def test_colcon_sees_an_ament_python_package(tmp_path, colcon):
     listing = colcon("list", "--base-paths", str(ROOT), cwd=tmp_path)
     assert "idpose_ros" in listing and "(ros.ament_python)" in listing
 

@@ -1,0 +1,65 @@
+"""The estimator's health as a `diagnostic_msgs/DiagnosticArray` for `/diagnostics`."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+STATUS_NAME = "idpose_estimator: estimation"
+
+
+@dataclass(frozen=True)
+class EstimatorStatus:
+    """What the node reports: ``state`` is idle, loading, estimating or failed."""
+
+    state: str
+    views_buffered: int
+    max_views: int
+    model: str
+    stage: str = ""
+    progress_percent: float = 0.0
+    last_error: str = ""
+    last_run_seconds: float | None = None
+    scores: tuple[float, ...] = field(default_factory=tuple)
+    ambiguous: tuple[bool, ...] = field(default_factory=tuple)
+
+
+def level(status: EstimatorStatus) -> bytes:
+    """ERROR when the last job failed, WARN when estimates are impossible for now, OK otherwise."""
+    if status.state == "failed":
+        return DiagnosticStatus.ERROR
+    if status.model.startswith("unavailable"):
+        return DiagnosticStatus.WARN
+    return DiagnosticStatus.OK
+
+
+def summary(status: EstimatorStatus) -> str:
+    if status.state in ("estimating", "loading"):
+        return f"{status.state}: {status.stage} {status.progress_percent:.0f} %"
+    if status.state == "failed":
+        return f"failed: {status.last_error}"
+    return f"{status.state}, {status.views_buffered} views buffered"
+
+
+def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> DiagnosticArray:
+    """One DiagnosticStatus with the state, progress, buffer, model, last run and per-view scores."""
+    values = {
+        "state": status.state,
+        "stage": status.stage,
+        "progress_percent": f"{status.progress_percent:.1f}",
+        "views_buffered": str(status.views_buffered),
+        "max_views": str(status.max_views),
+        "model": status.model,
+        "last_error": status.last_error,
+        "last_run_seconds": "" if status.last_run_seconds is None else f"{status.last_run_seconds:.3f}",
+    }
+    for view, (score, ambiguous) in enumerate(zip(status.scores, status.ambiguous), start=1):
+        values[f"view_{view}_score"] = f"{score:.6g}"
+        values[f"view_{view}_ambiguous"] = str(bool(ambiguous)).lower()
+    entry = DiagnosticStatus(level=level(status), name=STATUS_NAME, message=summary(status),
+                             hardware_id=hardware_id,
+                             values=[KeyValue(key=k, value=v) for k, v in values.items()])
+    array = DiagnosticArray(status=[entry])
+    array.header.stamp = stamp
+    return array

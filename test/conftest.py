@@ -1,0 +1,58 @@
+"""Shared fixtures: DDS isolation for rclpy tests, the colcon workspace and the tiny Zero-1-to-3.
+
+ROS_DOMAIN_ID is drawn at random (1..200) and discovery kept on this host when pytest imports
+this file, before any test calls rclpy.init, so concurrent test runs on the machine never see
+each other's nodes; subprocesses inherit both variables.
+"""
+import os
+import random
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Callable
+
+import pytest
+
+os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 200))
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+ROOT = Path(__file__).resolve().parents[1]
+COLCON = Path(sys.executable).with_name("colcon")
+
+
+def run_colcon(*args: str, cwd: Path) -> str:
+    """Run colcon from this environment in ``cwd``; fails the test with colcon's output on error."""
+    result = subprocess.run(
+        [str(COLCON), *args], cwd=cwd, capture_output=True, text=True, timeout=600,
+        env={**os.environ, "COLCON_LOG_PATH": str(cwd / "log")},
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    return result.stdout
+
+
+@pytest.fixture(scope="session")
+def colcon() -> Callable[..., str]:
+    """``colcon(*args, cwd=...)`` -> stdout."""
+    return run_colcon
+
+
+@pytest.fixture(scope="session")
+def workspace(tmp_path_factory) -> Path:
+    """A colcon workspace with this repository as its only package, built once as a user builds it."""
+    ws = tmp_path_factory.mktemp("ws")
+    src = ws / "src" / "idpose_ros"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".venv", ".git", "build", "install", "log",
+                                                             "__pycache__", ".pytest_cache", ".hypothesis"))
+    run_colcon("build", "--packages-select", "idpose_ros", cwd=ws)
+    return ws
+
+
+@pytest.fixture(scope="session")
+def tiny_model_dir(tmp_path_factory) -> Path:
+    """The tiny random Zero-1-to-3 (seed 0) saved as a diffusers folder, for ``model_path``."""
+    from idpose_core.zero123 import Zero123Predictor
+
+    path = tmp_path_factory.mktemp("tiny_zero123")
+    Zero123Predictor.tiny(seed=0).save_pretrained(path)
+    return path
