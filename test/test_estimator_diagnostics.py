@@ -1,0 +1,41 @@
+"""The estimator's /diagnostics message: state, level, progress, buffer, model and per-view scores."""
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from idpose_ros.diagnostics import STATUS_NAME, EstimatorStatus, diagnostic_array
+
+
+def values(status: EstimatorStatus) -> tuple[DiagnosticStatus, dict[str, str]]:
+    array = diagnostic_array(status, "idpose_estimator (cpu)", Time(sec=5, nanosec=6))
+    assert (array.header.stamp.sec, array.header.stamp.nanosec) == (5, 6)
+    (entry,) = array.status
+    assert entry.name == STATUS_NAME and entry.hardware_id == "idpose_estimator (cpu)"
+    return entry, {kv.key: kv.value for kv in entry.values}
+
+
+def test_an_estimate_in_progress_reports_stage_and_percent():
+    entry, kv = values(EstimatorStatus(state="estimating", views_buffered=3, max_views=8, model="loaded",
+                                       stage="refine", progress_percent=42.25))
+    assert entry.level == DiagnosticStatus.OK and entry.message == "estimating: refine 42 %"
+    assert (kv["state"], kv["stage"], kv["progress_percent"], kv["views_buffered"], kv["max_views"]) == (
+        "estimating", "refine", "42.2", "3", "8")
+
+
+def test_a_finished_run_reports_time_and_per_view_scores():
+    entry, kv = values(EstimatorStatus(state="idle", views_buffered=3, max_views=8, model="loaded",
+                                       last_run_seconds=12.3456, scores=(0.5, 0.25), ambiguous=(False, True)))
+    assert entry.level == DiagnosticStatus.OK and entry.message == "idle, 3 views buffered"
+    assert kv["last_run_seconds"] == "12.346"
+    assert (kv["view_1_score"], kv["view_1_ambiguous"], kv["view_2_score"], kv["view_2_ambiguous"]) == (
+        "0.5", "false", "0.25", "true")
+    assert "view_3_score" not in kv
+
+
+def test_failures_are_errors_and_a_missing_model_a_warning():
+    failed, kv = values(EstimatorStatus(state="failed", views_buffered=2, max_views=8, model="loaded",
+                                        last_error="PreprocessingError: view 1 has no object"))
+    assert failed.level == DiagnosticStatus.ERROR and "view 1 has no object" in failed.message
+    assert kv["last_error"] == "PreprocessingError: view 1 has no object"
+    idle, _ = values(EstimatorStatus(state="idle", views_buffered=0, max_views=8,
+                                     model="unavailable: no model available: /x does not exist"))
+    assert idle.level == DiagnosticStatus.WARN
