@@ -55,6 +55,8 @@ def array_to_image(arr: np.ndarray, encoding: str, header: Header | None = None)
     height, width = pixels.shape[:2]
     check_size(spec, height, width, "array")
     little_endian = np.ascontiguousarray(pixels, dtype=spec.dtype.newbyteorder("<"))
+    data = array.array("B")
+    data.frombytes(little_endian.reshape(-1).view(np.uint8))  # one copy, no Python-level iteration
     return Image(
         header=header if header is not None else Header(),
         height=height,
@@ -62,7 +64,7 @@ def array_to_image(arr: np.ndarray, encoding: str, header: Header | None = None)
         encoding=encoding,
         is_bigendian=0,
         step=width * spec.pixel_bytes,
-        data=array.array("B", little_endian.tobytes()),
+        data=data,
     )
 
 
