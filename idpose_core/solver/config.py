@@ -1,0 +1,98 @@
+"""``SolverConfig``: every tunable of the ID-Pose solver, with the paper's defaults and presets."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+VARIANTS = ("full", "tr", "naive")
+DEFAULT_POLAR_CANDIDATES_DEG = (-120.0, -60.0, 0.0, 60.0, 120.0)
+ANCHOR_POLAR_STEP_DEG = 45.0
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Solver settings; defaults are the official implementation's (Zero-1-to-3 XL, one GPU).
+
+    ``variant``: "naive" (pairs independent), "tr" (triangular refinement), "full" (triangular
+    exploration and refinement). Timesteps are fractions of the predictor's training steps.
+    Learning rates suit Zero-1-to-3's noise error; a predictor with a steeper error (e.g. the render
+    oracle) needs smaller ones. ``ambiguity_deg``/``ambiguity_margin`` define when a view is flagged
+    ambiguous (see ``idpose_core.solver.scoring``).
+    """
+
+    variant: str = "full"
+    azimuth_candidates: int = 8
+    polar_candidates_deg: tuple[float, ...] | None = None
+    anchor_polar_deg: float | None = None
+    probe_batch: int = 16
+    probe_t: float = 0.2
+    adjust_steps: int = 10
+    adjust_lr: float = 10.0
+    keep_top: int = 5
+    refine_steps_per_view: int = 600
+    refine_lr: float = 1.0
+    refine_t_range: tuple[float, float] = (0.2, 0.21)
+    average_last: int = 20
+    max_batch: int = 64
+    seed: int = 0
+    ambiguity_deg: float = 30.0
+    ambiguity_margin: float = 0.1
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> SolverConfig:
+        """Named settings: "default" (the paper's) or "fast" (about 6x fewer samples), then overrides."""
+        presets = {
+            "default": {},
+            "fast": dict(probe_batch=4, adjust_steps=5, keep_top=3, refine_steps_per_view=150,
+                         average_last=10),
+        }
+        if name not in presets:
+            raise ValueError(f"unknown solver preset {name!r}; choose one of {sorted(presets)}")
+        config = replace(cls(), **{**presets[name], **overrides})
+        config.validate()
+        return config
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first field out of range."""
+        def need(ok: bool, field: str, rule: str) -> None:
+            if not ok:
+                raise ValueError(f"SolverConfig.{field} = {getattr(self, field)!r}: must be {rule}")
+
+        need(self.variant in VARIANTS, "variant", f"one of {VARIANTS}")
+        for name in ("azimuth_candidates", "probe_batch", "keep_top", "average_last", "max_batch"):
+            need(isinstance(getattr(self, name), int) and getattr(self, name) >= 1, name, "an integer >= 1")
+        for name in ("adjust_steps", "refine_steps_per_view", "seed"):
+            need(isinstance(getattr(self, name), int) and getattr(self, name) >= 0, name, "an integer >= 0")
+        for name in ("adjust_lr", "refine_lr", "ambiguity_deg", "ambiguity_margin"):
+            value = getattr(self, name)
+            need(isinstance(value, (int, float)) and math.isfinite(value) and value > 0, name, "a finite number > 0")
+        need(0.0 <= self.probe_t < 1.0, "probe_t", "in [0, 1)")
+        low, high = self.refine_t_range
+        need(0.0 <= low <= high < 1.0, "refine_t_range", "(low, high) with 0 <= low <= high < 1")
+        if self.polar_candidates_deg is not None:
+            need(len(self.polar_candidates_deg) > 0
+                 and all(math.isfinite(a) and -180.0 <= a <= 180.0 for a in self.polar_candidates_deg),
+                 "polar_candidates_deg", "a non-empty tuple of angles in [-180, 180]")
+        if self.anchor_polar_deg is not None:
+            need(math.isfinite(self.anchor_polar_deg) and 0.0 < self.anchor_polar_deg < 180.0,
+                 "anchor_polar_deg", "in (0, 180)")
+
+    def polar_candidates(self) -> np.ndarray:
+        """Relative polar candidates (P,) radians: given, derived from the anchor's, or the default.
+
+        From an anchor polar angle q: 0 and steps of 45 deg up and down while q + d stays in (0, 180).
+        """
+        if self.polar_candidates_deg is not None:
+            return np.radians(np.asarray(self.polar_candidates_deg, dtype=np.float64))
+        if self.anchor_polar_deg is not None:
+            q = self.anchor_polar_deg
+            up = np.arange(0.0, -q, -ANCHOR_POLAR_STEP_DEG)
+            down = np.arange(ANCHOR_POLAR_STEP_DEG, 180.0 - q, ANCHOR_POLAR_STEP_DEG)
+            return np.radians(np.concatenate([up, down]))
+        return np.radians(np.asarray(DEFAULT_POLAR_CANDIDATES_DEG))
+
+    def as_dict(self) -> dict:
+        """Plain dict of every field (for logs and result files)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -1,0 +1,118 @@
+"""``SolverContext``: the one place the solver talks to the predictor, batched, counted, cancellable."""
+from __future__ import annotations
+
+import threading
+from typing import Callable
+
+import torch
+
+from idpose_core.predictor import NoisePredictor, Views
+from idpose_core.solver.config import SolverConfig
+from idpose_core.solver.errors import Cancelled
+from idpose_core.spherical import invert
+
+Progress = Callable[[str, int, int], None]
+
+
+class SolverContext:
+    """Predictor, encoded views, seeded randomness, sample counters, progress and cancellation.
+
+    Probes use one fixed noise batch (``probe_batch`` draws at ``probe_t``) so that errors of
+    different candidates compare fairly; gradient steps draw fresh noise and a fresh timestep.
+    Progress is reported per stage in predictor samples: ``progress(stage, done, total)``.
+    """
+
+    def __init__(self, predictor: NoisePredictor, views: Views, config: SolverConfig,
+                 progress: Progress | None = None, cancel: threading.Event | None = None):
+        self.predictor = predictor
+        self.views = views
+        self.config = config
+        self.device = views.latents.device
+        self.dtype = views.latents.dtype
+        self.generator = torch.Generator(device="cpu").manual_seed(config.seed)
+        steps = predictor.num_train_timesteps
+        self.probe_t = min(int(round(config.probe_t * steps)), steps - 1)
+        self.refine_t = tuple(min(int(round(f * steps)), steps - 1) for f in config.refine_t_range)
+        self.probe_noise = self.draw_noise(config.probe_batch)
+        self.forward_samples = 0
+        self.backward_samples = 0
+        self._progress = progress
+        self._cancel = cancel
+        self._stage, self._done, self._total = "", 0, 0
+
+    # ----- bookkeeping ---------------------------------------------------------------------------
+
+    def begin_stage(self, stage: str, total: int) -> None:
+        """Start counting progress of ``stage`` towards ``total`` samples."""
+        self._stage, self._done, self._total = stage, 0, int(total)
+        self._report()
+
+    def _advance(self, samples: int) -> None:
+        self._done += samples
+        self._report()
+
+    def _report(self) -> None:
+        if self._progress is not None:
+            self._progress(self._stage, self._done, self._total)
+
+    def check_cancel(self) -> None:
+        """Raise ``Cancelled`` when the caller's event is set."""
+        if self._cancel is not None and self._cancel.is_set():
+            raise Cancelled(f"solver cancelled during {self._stage or 'setup'}")
+
+    def draw_noise(self, count: int) -> torch.Tensor:
+        """Seeded standard normal noise (count, C, h, w) on the views' device and dtype."""
+        noise = torch.randn((count, *self.views.noise_shape), generator=self.generator)
+        return noise.to(device=self.device, dtype=self.dtype)
+
+    def uniform(self, count: int) -> torch.Tensor:
+        """Seeded uniform draws in [0, 1), (count,) on the CPU."""
+        return torch.rand(count, generator=self.generator)
+
+    def _errors(self, ref: torch.Tensor, tgt: torch.Tensor, pose: torch.Tensor, t: torch.Tensor,
+                noise: torch.Tensor) -> torch.Tensor:
+        """``noise_error`` over any number of samples in chunks of ``max_batch``; (B,)."""
+        parts = []
+        for start in range(0, len(ref), self.config.max_batch):
+            self.check_cancel()
+            chunk = slice(start, start + self.config.max_batch)
+            parts.append(self.predictor.noise_error(self.views, ref[chunk].to(self.device), tgt[chunk].to(self.device),
+                                                    pose[chunk], t[chunk].to(self.device), noise[chunk]))
+            self.forward_samples += len(parts[-1])
+            self._advance(len(parts[-1]))
+        return torch.cat(parts)
+
+    # ----- the two kinds of evaluation ----------------------------------------------------------
+
+    def pairwise_errors(self, ref: torch.Tensor, tgt: torch.Tensor, poses: torch.Tensor) -> torch.Tensor:
+        """Probe pairwise errors ``l(p; ref, tgt) + l(p'; tgt, ref)`` under the fixed noise; (K,).
+
+        ``ref``, ``tgt`` (K,) view indices, ``poses`` (K, 3) from ref to tgt. Each direction is the
+        mean over the ``probe_batch`` noises at ``probe_t``; all K x 2 x probe_batch samples go
+        through the predictor in as few calls as ``max_batch`` allows.
+        """
+        count, batch = len(ref), self.config.probe_batch
+        if count == 0:
+            return torch.zeros(0)
+        poses = poses.to(device=self.device, dtype=torch.float32)
+        both_ref = torch.stack([ref, tgt], dim=1)  # (K, 2): forward, reverse
+        both_tgt = torch.stack([tgt, ref], dim=1)
+        both_pose = torch.stack([poses, invert(poses)], dim=1)  # (K, 2, 3)
+        sample_ref = both_ref[:, :, None].expand(count, 2, batch).reshape(-1)
+        sample_tgt = both_tgt[:, :, None].expand(count, 2, batch).reshape(-1)
+        sample_pose = both_pose[:, :, None].expand(count, 2, batch, 3).reshape(-1, 3)
+        noise = self.probe_noise[None, None].expand(count, 2, *self.probe_noise.shape).reshape(
+            -1, *self.probe_noise.shape[1:])
+        t = torch.full((len(sample_ref),), self.probe_t, dtype=torch.long)
+        with torch.no_grad():
+            errors = self._errors(sample_ref, sample_tgt, sample_pose, t, noise)
+        return errors.view(count, 2, batch).mean(dim=2).sum(dim=1).float().cpu()
+
+    def step_errors(self, ref: torch.Tensor, tgt: torch.Tensor, poses: torch.Tensor) -> torch.Tensor:
+        """Errors (K,) for one gradient step: fresh noise, t uniform in ``refine_t_range``; differentiable."""
+        low, high = self.refine_t
+        t = torch.randint(low, high + 1, (len(ref),), generator=self.generator)
+        errors = self._errors(ref, tgt, poses, t, self.draw_noise(len(ref)))
+        self.backward_samples += len(errors)
+        return errors
+

@@ -1,0 +1,91 @@
+"""``estimate_poses``: the ID-Pose solver end to end (validate, encode, explore, select, refine, score)."""
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from idpose_core.predictor import NoisePredictor
+from idpose_core.solver.config import SolverConfig
+from idpose_core.solver.context import Progress, SolverContext
+from idpose_core.solver.exploration import explore
+from idpose_core.solver.refinement import refine
+from idpose_core.solver.result import SolverResult
+from idpose_core.solver.scoring import score
+from idpose_core.solver.selection import select
+from idpose_core.spherical import wrap_azimuth
+
+PIXEL_TOLERANCE = 1e-3
+
+
+def validated_images(images: torch.Tensor | Sequence[torch.Tensor]) -> torch.Tensor:
+    """Stack and check input views: (N, 3, H, W) float, N >= 2, equal sizes, finite, in [-1, 1]."""
+    if not isinstance(images, torch.Tensor):
+        shapes = [tuple(getattr(image, "shape", ())) for image in images]
+        if len(set(shapes)) > 1:
+            raise ValueError(f"all views must have the same size, got shapes {shapes}")
+        if not shapes:
+            raise ValueError("no views given: need at least 2")
+        images = torch.stack([torch.as_tensor(image) for image in images])
+    if images.ndim != 4 or images.shape[1] != 3:
+        raise ValueError(f"images must be (N, 3, H, W), got shape {tuple(images.shape)}")
+    if images.shape[0] < 2:
+        raise ValueError(f"need at least 2 views (an anchor and one more), got {images.shape[0]}")
+    if not torch.is_floating_point(images):
+        raise ValueError(f"images must be floating point in [-1, 1], got dtype {images.dtype}")
+    finite = torch.isfinite(images).flatten(1).all(dim=1)
+    if not finite.all():
+        raise ValueError(f"views {torch.nonzero(~finite).flatten().tolist()} contain NaN or infinite pixels")
+    low, high = float(images.min()), float(images.max())
+    if low < -1.0 - PIXEL_TOLERANCE or high > 1.0 + PIXEL_TOLERANCE:
+        raise ValueError(f"pixels must lie in [-1, 1], got range [{low:.3g}, {high:.3g}]")
+    return images
+
+
+def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[torch.Tensor],
+                   config: SolverConfig | None = None, progress: Progress | None = None,
+                   cancel: threading.Event | None = None) -> SolverResult:
+    """Relative poses from view 0 (the anchor) to views 1..N-1 by inverting ``predictor``.
+
+    ``images`` (N, 3, H, W) in [-1, 1] (or a sequence of (3, H, W)); ``progress(stage, done, total)``
+    is called as samples are evaluated; setting ``cancel`` stops before the next predictor call with
+    ``Cancelled``. Bad input raises ``ValueError`` before the predictor is touched. Seeded by
+    ``config.seed``: repeated runs on the CPU are identical.
+    """
+    config = config or SolverConfig()
+    config.validate()
+    images = validated_images(images)
+    seconds: dict[str, float] = {}
+
+    clock = time.perf_counter()
+    views = predictor.encode(images)
+    seconds["encode"] = time.perf_counter() - clock
+    if len(views) != len(images):
+        raise ValueError(f"predictor encoded {len(views)} views from {len(images)} images")
+    context = SolverContext(predictor, views, config, progress, cancel)
+
+    def timed(stage: str, work):
+        start = time.perf_counter()
+        out = work()
+        seconds[stage] = time.perf_counter() - start
+        return out
+
+    candidates = timed("exploration", lambda: explore(context, len(images)))
+    start = timed("selection", lambda: select(context, candidates))
+    poses = timed("refinement", lambda: refine(context, start))
+    poses[:, 1] = wrap_azimuth(poses[:, 1])
+    scores, runner_poses, runner_scores, ambiguous = timed("scoring", lambda: score(context, poses, candidates))
+    runner_poses[:, 1] = wrap_azimuth(runner_poses[:, 1])
+    return SolverResult(
+        rel_poses=poses.double().numpy(),
+        scores=scores.double().numpy(),
+        runner_up_poses=runner_poses.double().numpy(),
+        runner_up_scores=runner_scores.double().numpy(),
+        ambiguous=ambiguous.numpy(),
+        forward_samples=context.forward_samples,
+        backward_samples=context.backward_samples,
+        stage_seconds=seconds,
+    )
