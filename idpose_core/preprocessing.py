@@ -1,0 +1,202 @@
+"""Views -> Zero-1-to-3 inputs, as the paper prepares them: object on white, one shared square window, 256 px.
+
+The foreground mask of a view comes from its alpha channel when it has one; otherwise from its
+background colour when the image border is near-uniform (thresholding); otherwise OpenCV GrabCut,
+seeded with the pixels whose colours are least like the border's, weighted towards the image centre
+(a cluttered photo is assumed to have the object roughly in the middle). One square window serves
+the whole set (the largest mask bounding box side times ``window_scale``), so every view keeps the
+same scale; it is centred on each view's object and padded with white where it leaves the image.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+
+WHITE = (255, 255, 255)
+ALPHA_THRESHOLD = 127  # alpha above this is object
+BORDER_FRACTION = 0.03  # border band used to learn the background, as a fraction of the shorter side
+UNIFORM_TOLERANCE = 8.0  # CIE Lab Delta E from the border's median colour that counts as background
+UNIFORM_SHARE = 0.6  # this share of the border within tolerance -> near-uniform (objects may touch the edge)
+FOREGROUND_CONTRAST = 20.0  # Delta E from the background colour that counts as object
+SPECK_FRACTION = 0.05  # thresholded components smaller than this share of the largest are noise
+GRABCUT_SIDE = 320  # GrabCut works on the view scaled to this longer side
+GRABCUT_ITERATIONS = 5
+BORDER_COLOURS = 8  # k-means clusters summarising the border's colours
+CENTRE_SIGMA = 1.0 / 3.0  # centre prior width, as a fraction of the image side
+SURE_OBJECT_SCORE = 0.5  # seed score (of the maximum) above which a pixel is surely object
+
+
+class PreprocessingError(ValueError):
+    """A view cannot be prepared (bad array, or no object found); the message names the view."""
+
+
+@dataclass(frozen=True)
+class PreprocessedViews:
+    """``images`` (N, 3, size, size) float32 in [-1, 1]; ``masks`` N bool (H_i, W_i) input-resolution
+    foreground masks; ``mask_methods`` N of "alpha" | "threshold" | "grabcut"; ``windows`` N
+    (x, y, side) square crops in input pixels (may extend past the image, padded white)."""
+
+    images: torch.Tensor
+    masks: list[np.ndarray]
+    mask_methods: list[str]
+    windows: list[tuple[int, int, int]]
+
+
+def _lab(rgb: np.ndarray) -> np.ndarray:
+    """RGB uint8 (H, W, 3) -> CIE Lab float32 (L in [0, 100]) so distances are Delta E."""
+    return cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+
+
+def _border_band(shape: tuple[int, int]) -> np.ndarray:
+    """Bool (H, W), True on the outer band of width BORDER_FRACTION of the shorter side (at least 2 px)."""
+    height, width = shape
+    band = np.zeros((height, width), dtype=bool)
+    width_px = max(2, int(round(BORDER_FRACTION * min(height, width))))
+    band[:width_px], band[-width_px:], band[:, :width_px], band[:, -width_px:] = True, True, True, True
+    return band
+
+
+def _drop_specks(mask: np.ndarray) -> np.ndarray:
+    """Keep the connected components of at least SPECK_FRACTION of the largest one's area."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    if count <= 1:
+        return mask
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    kept = np.flatnonzero(areas >= SPECK_FRACTION * areas.max()) + 1
+    return np.isin(labels, kept)
+
+
+def threshold_mask(rgb: np.ndarray) -> np.ndarray | None:
+    """Object mask (H, W) bool against a near-uniform background (its colour: the border median), else None."""
+    lab = _lab(cv2.medianBlur(rgb, 3))  # median: drops sensor noise, keeps the object's edges in place
+    band = _border_band(rgb.shape[:2])
+    background = np.median(lab[band], axis=0)
+    distance = np.linalg.norm(lab - background, axis=-1)
+    if np.mean(distance[band] <= UNIFORM_TOLERANCE) < UNIFORM_SHARE:
+        return None
+    mask = (distance > FOREGROUND_CONTRAST).astype(np.uint8)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
+    return _drop_specks(mask.astype(bool))
+
+
+def _grabcut_seeds(small_rgb: np.ndarray) -> np.ndarray:
+    """GrabCut mask (h, w) uint8: border = background, distinctive central colours = (probable) object."""
+    lab = cv2.GaussianBlur(_lab(small_rgb), (0, 0), 2.0)
+    band = _border_band(small_rgb.shape[:2])
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1.0)
+    cv2.setRNGSeed(0)
+    _, _, colours = cv2.kmeans(lab[band], BORDER_COLOURS, None, criteria, 3, cv2.KMEANS_PP_CENTERS)
+    distinctiveness = np.min(np.linalg.norm(lab[:, :, None, :] - colours[None, None], axis=-1), axis=-1)
+    height, width = band.shape
+    rows, cols = np.mgrid[0:height, 0:width]
+    centre_prior = np.exp(
+        -0.5 * (((cols - width / 2) / (CENTRE_SIGMA * width)) ** 2 + ((rows - height / 2) / (CENTRE_SIGMA * height)) ** 2)
+    )
+    score = distinctiveness * centre_prior
+    score8 = np.round(255.0 * score / max(float(score.max()), 1e-12)).astype(np.uint8)
+    otsu, _ = cv2.threshold(score8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    seeds = np.full(band.shape, cv2.GC_PR_BGD, dtype=np.uint8)
+    seeds[score8 > otsu] = cv2.GC_PR_FGD
+    seeds[score8 >= max(otsu, 255 * SURE_OBJECT_SCORE)] = cv2.GC_FGD
+    seeds[band] = cv2.GC_BGD
+    return seeds
+
+
+def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
+    """Object mask (H, W) bool of a cluttered photo: GrabCut at GRABCUT_SIDE px, the component holding most sure-object seeds."""
+    height, width = rgb.shape[:2]
+    scale = min(1.0, GRABCUT_SIDE / max(height, width))
+    small = cv2.resize(rgb, (max(1, round(width * scale)), max(1, round(height * scale))), interpolation=cv2.INTER_AREA)
+    seeds = _grabcut_seeds(small)
+    labels = seeds.copy()
+    cv2.grabCut(small, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
+    foreground = np.isin(labels, (cv2.GC_FGD, cv2.GC_PR_FGD)).astype(np.uint8)
+    _, components = cv2.connectedComponents(foreground, connectivity=8)
+    sure_per_component = np.bincount(components[seeds == cv2.GC_FGD], minlength=components.max() + 1)
+    sure_per_component[0] = 0
+    mask = (components == int(np.argmax(sure_per_component))).astype(np.float32)
+    return cv2.resize(mask, (width, height), interpolation=cv2.INTER_LINEAR) >= 0.5
+
+
+def foreground_mask(rgb: np.ndarray, alpha: np.ndarray | None) -> tuple[np.ndarray, str]:
+    """(mask (H, W) bool, method): "alpha" when ``alpha`` marks something transparent, else "threshold", else "grabcut"."""
+    if alpha is not None:
+        mask = alpha > ALPHA_THRESHOLD
+        if not mask.all():
+            return mask, "alpha"
+    mask = threshold_mask(rgb)
+    if mask is not None:
+        return mask, "threshold"
+    return grabcut_mask(rgb), "grabcut"
+
+
+def on_white(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """RGB uint8 (H, W, 3) with white outside the object mask (a hard cut: some alpha channels offset their values)."""
+    return np.where(mask[..., None], rgb, np.uint8(255))
+
+
+def bounding_box(mask: np.ndarray) -> tuple[int, int, int, int]:
+    """(x, y, width, height) of the True pixels of a non-empty mask."""
+    return cv2.boundingRect(mask.astype(np.uint8))
+
+
+def square_window(mask: np.ndarray, side: int) -> tuple[int, int, int]:
+    """(x, y, side) of the square of ``side`` px centred on the mask's bounding box."""
+    x, y, width, height = bounding_box(mask)
+    return int(round(x + (width - side) / 2)), int(round(y + (height - side) / 2)), side
+
+
+def crop_padded(image: np.ndarray, window: tuple[int, int, int]) -> np.ndarray:
+    """The ``window`` (x, y, side) of ``image`` (H, W, 3), padded with white where it leaves the image."""
+    x, y, side = window
+    height, width = image.shape[:2]
+    top, left = max(0, -y), max(0, -x)
+    bottom, right = max(0, y + side - height), max(0, x + side - width)
+    padded = cv2.copyMakeBorder(image, top, bottom, left, right, cv2.BORDER_CONSTANT, value=WHITE)
+    return padded[y + top : y + top + side, x + left : x + left + side]
+
+
+def _check_view(index: int, rgb: np.ndarray, alpha: np.ndarray | None) -> None:
+    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise PreprocessingError(f"view {index}: expected an RGB uint8 array (H, W, 3), got "
+                                 f"{getattr(rgb, 'dtype', type(rgb).__name__)} {getattr(rgb, 'shape', '')}")
+    if min(rgb.shape[:2]) < 8:
+        raise PreprocessingError(f"view {index}: image {rgb.shape[1]}x{rgb.shape[0]} is too small")
+    if alpha is not None and (not isinstance(alpha, np.ndarray) or alpha.dtype != np.uint8
+                              or alpha.shape != rgb.shape[:2]):
+        raise PreprocessingError(f"view {index}: alpha must be uint8 {rgb.shape[:2]}, got "
+                                 f"{getattr(alpha, 'dtype', type(alpha).__name__)} {getattr(alpha, 'shape', '')}")
+
+
+def preprocess_views(
+    rgbs: list[np.ndarray], alphas: list[np.ndarray | None], size: int = 256, window_scale: float = 1.5
+) -> PreprocessedViews:
+    """N views (RGB uint8 (H_i, W_i, 3), alpha uint8 (H_i, W_i) or None) -> ``PreprocessedViews`` of (N, 3, size, size).
+
+    Raises ``PreprocessingError`` naming the view for a malformed array or an empty object mask.
+    """
+    if len(rgbs) == 0 or len(rgbs) != len(alphas):
+        raise PreprocessingError(f"need one alpha entry (or None) per view, got {len(rgbs)} images and {len(alphas)}")
+    if size < 1 or not window_scale > 0:
+        raise PreprocessingError(f"size must be >= 1 and window_scale > 0, got {size} and {window_scale}")
+    masks, methods = [], []
+    for index, (rgb, alpha) in enumerate(zip(rgbs, alphas)):
+        _check_view(index, rgb, alpha)
+        mask, method = foreground_mask(rgb, alpha)
+        if not mask.any():
+            raise PreprocessingError(f"view {index}: no object found (empty {method} mask)")
+        masks.append(mask)
+        methods.append(method)
+    largest_side = max(max(bounding_box(mask)[2:]) for mask in masks)
+    side = max(1, int(round(largest_side * window_scale)))
+    windows, crops = [], []
+    for rgb, mask in zip(rgbs, masks):
+        window = square_window(mask, side)
+        crop = crop_padded(on_white(rgb, mask), window)
+        crops.append(cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA))
+        windows.append(window)
+    pixels = torch.from_numpy(np.stack(crops)).permute(0, 3, 1, 2).float()
+    return PreprocessedViews(pixels / 127.5 - 1.0, masks, methods, windows)
