@@ -87,15 +87,12 @@ def _grabcut_seeds(small_rgb: np.ndarray) -> np.ndarray:
     lab = cv2.GaussianBlur(_lab(small_rgb), (0, 0), 2.0)
     band = _border_band(small_rgb.shape[:2])
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1.0)
-    cv2.setRNGSeed(0)
     _, _, colours = cv2.kmeans(lab[band], BORDER_COLOURS, None, criteria, 3, cv2.KMEANS_PP_CENTERS)
     distinctiveness = np.min(np.linalg.norm(lab[:, :, None, :] - colours[None, None], axis=-1), axis=-1)
     height, width = band.shape
     rows, cols = np.mgrid[0:height, 0:width]
-    centre_prior = np.exp(
-        -0.5 * (((cols - width / 2) / (CENTRE_SIGMA * width)) ** 2 + ((rows - height / 2) / (CENTRE_SIGMA * height)) ** 2)
-    )
-    score = distinctiveness * centre_prior
+    offsets = ((cols - width / 2) / (CENTRE_SIGMA * width)) ** 2 + ((rows - height / 2) / (CENTRE_SIGMA * height)) ** 2
+    score = np.where(band, 0.0, distinctiveness * np.exp(-0.5 * offsets))
     score8 = np.round(255.0 * score / max(float(score.max()), 1e-12)).astype(np.uint8)
     otsu, _ = cv2.threshold(score8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     seeds = np.full(band.shape, cv2.GC_PR_BGD, dtype=np.uint8)
@@ -106,11 +103,17 @@ def _grabcut_seeds(small_rgb: np.ndarray) -> np.ndarray:
 
 
 def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
-    """Object mask (H, W) bool of a cluttered photo: GrabCut at GRABCUT_SIDE px, the component holding most sure-object seeds."""
+    """Object mask (H, W) bool of a cluttered photo: GrabCut at GRABCUT_SIDE px, the component with most sure seeds.
+
+    Seeds OpenCV's random generator (k-means and GrabCut's GMMs) so the same photo gives the same mask.
+    """
     height, width = rgb.shape[:2]
     scale = min(1.0, GRABCUT_SIDE / max(height, width))
     small = cv2.resize(rgb, (max(1, round(width * scale)), max(1, round(height * scale))), interpolation=cv2.INTER_AREA)
+    cv2.setRNGSeed(0)
     seeds = _grabcut_seeds(small)
+    if not np.any(seeds == cv2.GC_FGD):  # nothing stands out from the border: no object to cut out
+        return np.zeros((height, width), dtype=bool)
     labels = seeds.copy()
     cv2.grabCut(small, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
     foreground = np.isin(labels, (cv2.GC_FGD, cv2.GC_PR_FGD)).astype(np.uint8)
@@ -122,7 +125,7 @@ def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
 
 
 def foreground_mask(rgb: np.ndarray, alpha: np.ndarray | None) -> tuple[np.ndarray, str]:
-    """(mask (H, W) bool, method): "alpha" when ``alpha`` marks something transparent, else "threshold", else "grabcut"."""
+    """(mask (H, W) bool, method): "alpha" if ``alpha`` marks anything transparent, else "threshold", else "grabcut"."""
     if alpha is not None:
         mask = alpha > ALPHA_THRESHOLD
         if not mask.all():

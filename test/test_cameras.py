@@ -23,7 +23,9 @@ REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "idpo
 spheres = st.tuples(
     st.floats(1e-3, math.pi - 1e-3), st.floats(0.0, TWO_PI, exclude_max=True), st.floats(0.1, 20.0)
 ).map(np.array)
-rel_poses = st.tuples(st.floats(-0.8, 0.8), st.floats(0.0, TWO_PI, exclude_max=True), st.floats(-0.5, 0.5)).map(np.array)
+rel_poses = st.tuples(
+    st.floats(-0.8, 0.8), st.floats(0.0, TWO_PI, exclude_max=True), st.floats(-0.5, 0.5)
+).map(np.array)
 POLES = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, -3.0]])
 
 
@@ -130,7 +132,7 @@ def test_anchor_frame_relative_radius_is_in_zero123_units():
 
 
 @given(st.floats(0.05, math.pi - 0.05), st.floats(0.0, TWO_PI), st.lists(rel_poses, min_size=1, max_size=4))
-def test_anchor_frame_poses_match_the_spherical_cameras_anywhere_in_the_world(anchor_polar, anchor_azimuth, rels):
+def test_anchor_frame_poses_give_back_the_spherical_cameras(anchor_polar, anchor_azimuth, rels):
     """Put the anchor at any azimuth of the world: the published poses give back every view's sphere point."""
     distance = 0.8
     poses = anchor_frame_poses(np.array(rels), anchor_polar, distance)
@@ -145,15 +147,32 @@ def test_anchor_frame_poses_match_the_spherical_cameras_anywhere_in_the_world(an
         np.testing.assert_allclose(cam[2, 0], 0.0, atol=1e-9)  # still no roll w.r.t. world up
 
 
-def test_anchor_frame_poses_straight_above():
-    poses = anchor_frame_poses(np.array([[0.3, 1.0, 0.0]]), anchor_polar=0.0, object_distance=1.0)
-    assert np.all(np.isfinite(poses))
-    np.testing.assert_allclose(poses[1][:3, :3] @ poses[1][:3, :3].T, np.eye(3), atol=1e-12)
+@pytest.mark.parametrize("anchor_polar", [0.0, math.pi])
+def test_anchor_frame_poses_from_straight_above_or_below(anchor_polar):
+    poses = anchor_frame_poses(np.array([[0.3, 1.0, 0.0], [0.0, 2.0, 0.0]]), anchor_polar, object_distance=1.0)
+    object_at_origin = np.eye(4)
+    object_at_origin[2, 3] = -1.0
+    assert_valid_camera(opengl_to_optical(object_at_origin @ poses))
+    # Azimuth +2 at the pole: the same place, turned 2 rad about world +z, which is optical -z looking
+    # down from above and optical +z looking up from below.
+    np.testing.assert_allclose(poses[2][:3, 3], 0.0, atol=1e-12)
+    expected = -2.0 if anchor_polar == 0.0 else 2.0
+    np.testing.assert_allclose(rotation_about_optical_axis(poses[2]), expected, atol=1e-9)
+
+
+def rotation_about_optical_axis(pose):
+    """Signed angle (rad) of a pose rotated only about its optical z axis."""
+    return math.atan2(pose[1, 0], pose[0, 0])
 
 
 @pytest.mark.parametrize(
     "rel, polar, distance",
-    [([[0.0, 0.0, -1.85]], 1.0, 1.0), ([[0.0, 0.0, -2.5]], 1.0, 1.0), ([[np.nan, 0.0, 0.0]], 1.0, 1.0), ([[0.0, 0.0, 0.0]], 1.0, 0.0)],
+    [
+        ([[0.0, 0.0, -1.85]], 1.0, 1.0),
+        ([[0.0, 0.0, -2.5]], 1.0, 1.0),
+        ([[np.nan, 0.0, 0.0]], 1.0, 1.0),
+        ([[0.0, 0.0, 0.0]], 1.0, 0.0),
+    ],
 )
 def test_anchor_frame_poses_reject_bad_input(rel, polar, distance):
     with pytest.raises(ValueError):
