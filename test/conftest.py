@@ -56,3 +56,16 @@ def tiny_model_dir(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("tiny_zero123")
     Zero123Predictor.tiny(seed=0).save_pretrained(path)
     return path
+
+
+@pytest.fixture(scope="module")
+def ros_context():
+    """An rclpy context of its own per test module (no signal handlers: pytest keeps Ctrl-C)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    yield context
+    rclpy.shutdown(context=context)

@@ -1,0 +1,150 @@
+"""The estimator's ROS parameters: one table with descriptions, ranges and choices, and their checks.
+
+Solver parameters carry ``SolverConfig``'s field names and defaults, so the node and the
+solver cannot drift apart; ``SolverConfig.validate`` has the last word on combinations.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from idpose_core.solver import SolverConfig
+
+INT32_MAX = 2**31 - 1
+
+
+def _spec(description: str, *, choices: tuple[str, ...] = (), bounds: tuple[float, float] | None = None,
+          read_only: bool = False) -> dict[str, Any]:
+    return {"description": description, "choices": choices, "bounds": bounds, "read_only": read_only}
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """The node's own parameters (the solver's are in ``SOLVER_PARAMETERS``)."""
+
+    model_path: str = field(default="", metadata=_spec(
+        "Zero-1-to-3 weights: a diffusers folder or an LDM .ckpt; empty = the embedded default model",
+        read_only=True))
+    device: str = field(default="auto", metadata=_spec(
+        "where the model runs (auto = cuda when available)", choices=("auto", "cpu", "cuda"), read_only=True))
+    precision: str = field(default="auto", metadata=_spec(
+        "model dtype (auto = float16 on cuda, float32 on cpu)",
+        choices=("auto", "float32", "float16", "bfloat16"), read_only=True))
+    load_model_at_startup: bool = field(default=True, metadata=_spec(
+        "load the model when the node starts (false: on the first estimate)", read_only=True))
+    capture_mode: str = field(default="auto", metadata=_spec(
+        "auto: keep every image min_view_interval s after the last kept one; on_request: ~/capture keeps "
+        "the latest image", choices=("auto", "on_request")))
+    min_view_interval: float = field(default=1.0, metadata=_spec(
+        "seconds between two views kept in auto capture mode", bounds=(0.0, 3600.0)))
+    max_views: int = field(default=8, metadata=_spec(
+        "most views buffered (the first is the anchor); lowering it keeps views already buffered",
+        bounds=(2, 64)))
+    views_per_estimate: int = field(default=0, metadata=_spec(
+        "start an estimate automatically when this many views are buffered (0 = only on ~/estimate)",
+        bounds=(0, 64)))
+    anchor_polar_deg: float = field(default=90.0, metadata=_spec(
+        "polar angle of the anchor camera around the object (deg from world up +z; 90 = level), "
+        "turns relative spherical poses into SE(3) and narrows the polar search", bounds=(1.0, 179.0)))
+    object_distance: float = field(default=1.0, metadata=_spec(
+        "anchor camera to object centre (m): the metric scale of the published positions",
+        bounds=(0.001, 1000.0)))
+    anchor_frame: str = field(default="", metadata=_spec(
+        "frame_id of the published poses; empty = the anchor image's header.frame_id"))
+    diagnostics_period: float = field(default=1.0, metadata=_spec(
+        "seconds between two /diagnostics messages", bounds=(0.05, 60.0), read_only=True))
+
+
+SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
+    "variant": _spec("multi-view solver: full (triangular exploration and refinement), tr (triangular "
+                     "refinement only) or naive (pairs independent)", choices=("full", "tr", "naive")),
+    "azimuth_candidates": _spec("azimuth candidates explored per view", bounds=(1, 360)),
+    "probe_batch": _spec("noise samples per candidate probe", bounds=(1, 1024)),
+    "adjust_steps": _spec("gradient steps on the better half of the candidates", bounds=(0, 10000)),
+    "adjust_lr": _spec("learning rate of the candidate adjustment", bounds=(0.0, 1000.0)),
+    "keep_top": _spec("candidates kept per view after exploration", bounds=(1, 360)),
+    "refine_steps_per_view": _spec("refinement steps per non-anchor view", bounds=(0, 1000000)),
+    "refine_lr": _spec("learning rate of the refinement", bounds=(0.0, 1000.0)),
+    "average_last": _spec("the answer is the mean of this many last refinement iterates", bounds=(1, 1000000)),
+    "max_batch": _spec("largest batch sent to the model at once (lower it when memory is short)",
+                       bounds=(1, 4096)),
+    "seed": _spec("random seed of the solver's noise", bounds=(0, INT32_MAX)),
+}
+
+
+def parameter_table() -> list[tuple[str, Any, dict[str, Any]]]:
+    """(name, default, spec) of every parameter, node first, then solver."""
+    solver_defaults = SolverConfig()
+    node = [(f.name, f.default, dict(f.metadata)) for f in dataclasses.fields(NodeSettings)]
+    solver = [(name, getattr(solver_defaults, name), spec) for name, spec in SOLVER_PARAMETERS.items()]
+    return node + solver
+
+
+def descriptor(name: str, default: Any, spec: dict[str, Any]) -> ParameterDescriptor:
+    """A ParameterDescriptor with the description, the choices, the range and read-only flag."""
+    text = spec["description"]
+    if spec["choices"]:
+        text += f" (one of {', '.join(spec['choices'])})"
+    result = ParameterDescriptor(name=name, description=text, read_only=spec["read_only"])
+    if spec["bounds"] is not None:
+        low, high = spec["bounds"]
+        if isinstance(default, bool) or not isinstance(default, (int, float)):
+            raise TypeError(f"parameter {name}: bounds need a numeric default, got {default!r}")
+        if isinstance(default, int):
+            result.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
+        else:
+            result.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
+    return result
+
+
+def problem(values: dict[str, Any]) -> str | None:
+    """Why this complete set of parameter values cannot be used, or None when it can."""
+    for name, _, spec in parameter_table():
+        if spec["choices"] and values[name] not in spec["choices"]:
+            return f"{name} must be one of {', '.join(spec['choices'])}, got {values[name]!r}"
+    if values["views_per_estimate"] > values["max_views"]:
+        return (f"views_per_estimate ({values['views_per_estimate']}) cannot exceed max_views "
+                f"({values['max_views']})")
+    try:
+        solver_config(values).validate()
+    except ValueError as exc:
+        return f"invalid solver parameters: {exc}"
+    return None
+
+
+def solver_config(values: dict[str, Any]) -> SolverConfig:
+    """The SolverConfig these parameter values describe (fields not exposed keep their defaults).
+
+    The anchor's known polar angle also narrows the solver's relative polar candidates.
+    """
+    return dataclasses.replace(SolverConfig(), anchor_polar_deg=values["anchor_polar_deg"],
+                               **{name: values[name] for name in SOLVER_PARAMETERS})
+
+
+def node_settings(values: dict[str, Any]) -> NodeSettings:
+    return NodeSettings(**{f.name: values[f.name] for f in dataclasses.fields(NodeSettings)})
+
+
+def current_values(node: Node) -> dict[str, Any]:
+    """Every parameter's current value (its default while it is not declared yet)."""
+    return {name: node.get_parameter(name).value if node.has_parameter(name) else default
+            for name, default, _ in parameter_table()}
+
+
+def declare_parameters(node: Node) -> None:
+    """Declare every parameter with its descriptor; every later change goes through ``problem``.
+
+    Raises rclpy's InvalidParameterValueException naming the problem when an override is invalid.
+    """
+    def check(changes: list[Parameter]) -> SetParametersResult:
+        reason = problem({**current_values(node), **{p.name: p.value for p in changes}})
+        return SetParametersResult(successful=reason is None, reason=reason or "")
+
+    node.add_on_set_parameters_callback(check)
+    for name, default, spec in parameter_table():
+        node.declare_parameter(name, default, descriptor(name, default, spec))

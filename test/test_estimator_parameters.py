@@ -1,0 +1,94 @@
+"""The estimator's parameters: descriptors, the shipped YAML, and changes rejected with a reason.
+
+Runs rclpy's real parameter machinery on a bare node that declares the estimator's parameters
+(the node itself, with a model, is exercised in test_estimator_node.py).
+"""
+from pathlib import Path
+
+import pytest
+import yaml
+from rcl_interfaces.msg import ParameterType
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from idpose_core.solver import SolverConfig
+from idpose_ros.parameters import SOLVER_PARAMETERS, declare_parameters, node_settings, parameter_table, \
+    solver_config
+
+ROOT = Path(__file__).resolve().parents[1]
+READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "diagnostics_period"}
+
+
+@pytest.fixture
+def node(ros_context):
+    node = Node("parameters_under_test", context=ros_context)
+    declare_parameters(node)
+    yield node
+    node.destroy_node()
+
+
+def test_the_shipped_yaml_lists_every_parameter_with_its_default():
+    shipped = yaml.safe_load((ROOT / "config" / "estimator.yaml").read_text())["idpose_estimator"]["ros__parameters"]
+    assert shipped == {name: default for name, default, _ in parameter_table()}
+
+
+def test_solver_parameters_default_to_the_solver_defaults_and_build_its_config(node):
+    values = {name: node.get_parameter(name).value for name, _, _ in parameter_table()}
+    config = solver_config(values)
+    defaults = SolverConfig()
+    assert all(getattr(config, name) == getattr(defaults, name) for name in SOLVER_PARAMETERS)
+    assert config.anchor_polar_deg == node_settings(values).anchor_polar_deg == 90.0
+    config.validate()
+
+
+def test_every_parameter_is_described_and_bounded_where_numeric(node):
+    for name, default, _ in parameter_table():
+        (descriptor,) = node.describe_parameters([name])
+        assert len(descriptor.description) > 20, name
+        assert descriptor.read_only == (name in READ_ONLY), name
+        if descriptor.type == ParameterType.PARAMETER_INTEGER:
+            assert descriptor.integer_range, name
+        if descriptor.type == ParameterType.PARAMETER_DOUBLE:
+            assert descriptor.floating_point_range, name
+    (device,) = node.describe_parameters(["device"])
+    assert "auto, cpu, cuda" in device.description
+
+
+@pytest.mark.parametrize("name, value, reason", [
+    ("max_views", 1, "out of range"),
+    ("max_views", 65, "out of range"),
+    ("min_view_interval", -0.5, "out of range"),
+    ("anchor_polar_deg", 181.0, "out of range"),
+    ("refine_lr", 0.0, "SolverConfig.refine_lr"),
+    ("capture_mode", "sometimes", "capture_mode must be one of auto, on_request"),
+    ("variant", "best", "variant must be one of full, tr, naive"),
+    ("views_per_estimate", 9, "views_per_estimate (9) cannot exceed max_views (8)"),
+    ("model_path", "/elsewhere", "read-only"),
+    ("device", "cuda", "read-only"),
+    ("max_views", "eight", "type"),
+])
+def test_invalid_changes_are_rejected_with_a_reason(node, name, value, reason):
+    before = node.get_parameter(name).value
+    (result,) = node.set_parameters([Parameter(name, value=value)])
+    assert not result.successful
+    assert reason.lower() in result.reason.lower(), result.reason
+    assert node.get_parameter(name).value == before
+
+
+def test_valid_changes_are_taken_together(node):
+    results = node.set_parameters_atomically([Parameter("max_views", value=12),
+                                              Parameter("views_per_estimate", value=10),
+                                              Parameter("refine_steps_per_view", value=5)])
+    assert results.successful, results.reason
+    assert (node.get_parameter("views_per_estimate").value, node.get_parameter("refine_steps_per_view").value) == (10, 5)
+
+
+def test_an_invalid_override_at_start_up_names_the_problem(ros_context):
+    node = Node("bad_overrides", context=ros_context,
+                parameter_overrides=[Parameter("capture_mode", value="continuous")])
+    try:
+        with pytest.raises(InvalidParameterValueException, match="capture_mode must be one of"):
+            declare_parameters(node)
+    finally:
+        node.destroy_node()

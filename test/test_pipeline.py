@@ -1,0 +1,110 @@
+"""estimate_view_poses: rendered views -> camera poses in the anchor's optical frame, end to end.
+
+The predictor is the RenderOracle (the ideal denoiser of the rendered scene), so the true poses
+are known. Reduced for speed: oracle grid every 10 deg at 16 px latents, 6 azimuth candidates,
+probe batch 4, 3 adjustment steps, 150 refinement steps per view (the paper: 8, 16, 10, 600).
+"""
+import threading
+
+import numpy as np
+import pytest
+import torch
+
+from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
+from idpose_core.pipeline import estimate_view_poses, views_mosaic
+from idpose_core.preprocessing import PreprocessingError
+from idpose_core.solver import Cancelled, SolverConfig
+from idpose_core.synthetic.render_oracle import RenderOracle
+from idpose_core.synthetic.scenes import CAMERA_RADIUS, SceneRenderer, demo_objects
+
+TRUE_SPH = np.array([[70.0, 20.0], [80.0, 110.0], [60.0, 230.0]])  # (polar, azimuth) deg of views 0..2
+CONFIG = SolverConfig(azimuth_candidates=6, probe_batch=4, adjust_steps=3, adjust_lr=0.1, keep_top=2,
+                      refine_steps_per_view=150, refine_lr=0.05, average_last=10)
+OBJECT_DISTANCE = 0.6  # metres: the published scale, unrelated to the render radius
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """Three rendered views (RGB on white, alpha from the mask) and the oracle that knows them."""
+    torch.set_num_threads(2)
+    spec = demo_objects()[0]
+    sph = np.column_stack([np.radians(TRUE_SPH), np.full(len(TRUE_SPH), CAMERA_RADIUS)])
+    with SceneRenderer(spec, image_size=96) as renderer:
+        renders = [renderer.render(*pose) for pose in sph]
+    oracle = RenderOracle(spec, sph, step_deg=10.0, latent_size=16, render_size=48)
+    rgbs = [rgb for rgb, _ in renders]
+    alphas = [(mask * 255).astype(np.uint8) for _, mask in renders]
+    return sph, oracle, rgbs, alphas
+
+
+def true_poses(sph: np.ndarray) -> np.ndarray:
+    """Ground truth: optical camera poses in the anchor's optical frame, scaled to OBJECT_DISTANCE."""
+    world = opengl_to_optical(spherical_to_c2w(sph))
+    poses = np.linalg.inv(world[0]) @ world
+    poses[:, :3, 3] *= OBJECT_DISTANCE / sph[0, 2]
+    return poses
+
+
+def rotation_error_deg(a: np.ndarray, b: np.ndarray) -> float:
+    cosine = (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
+
+
+def test_rendered_views_come_back_as_their_true_poses_in_the_anchor_frame(scene):
+    sph, oracle, rgbs, alphas = scene
+    reports = []
+    result = estimate_view_poses(oracle, rgbs, [alphas[0], None, alphas[2]], CONFIG, sph[0, 0], OBJECT_DISTANCE,
+                                 progress=lambda stage, done, total: reports.append((stage, done, total)))
+    assert result.poses.shape == (3, 4, 4)
+    np.testing.assert_allclose(result.poses[0], np.eye(4), atol=1e-9)
+    expected = true_poses(sph)
+    for k in (1, 2):
+        assert rotation_error_deg(result.poses[k], expected[k]) < 8.0, k
+        assert np.linalg.norm(result.poses[k][:3, 3] - expected[k][:3, 3]) < 0.1 * OBJECT_DISTANCE, k
+        np.testing.assert_allclose(result.poses[k][:3, :3] @ result.poses[k][:3, :3].T, np.eye(3), atol=1e-9)
+    assert result.solver_result.rel_poses.shape == (2, 3)
+    assert tuple(result.preprocessed.images.shape) == (3, 3, 256, 256)
+    assert result.preprocessed.mask_methods[0] == "alpha" and result.preprocessed.mask_methods[2] == "alpha"
+    assert result.preprocessed.mask_methods[1] != "alpha"
+    stages = {stage for stage, _, _ in reports}
+    assert {"exploration", "refinement"} <= stages, stages
+    last = {stage: (done, total) for stage, done, total in reports}
+    assert all(done == total > 0 for done, total in last.values()), last
+
+
+def test_a_cancel_during_the_run_raises_cancelled(scene):
+    sph, oracle, rgbs, alphas = scene
+    cancel = threading.Event()
+    calls = []
+
+    def progress(stage, done, total):
+        calls.append(stage)
+        if len(calls) == 3:
+            cancel.set()
+
+    with pytest.raises(Cancelled):
+        estimate_view_poses(oracle, rgbs, alphas, CONFIG, sph[0, 0], OBJECT_DISTANCE, progress=progress, cancel=cancel)
+    assert len(calls) < 10, "stopped soon after the request"
+
+
+def test_bad_view_sets_are_refused_with_the_problem_named(scene):
+    sph, oracle, rgbs, alphas = scene
+    with pytest.raises(ValueError, match="at least 2 views"):
+        estimate_view_poses(oracle, rgbs[:1], alphas[:1], CONFIG, sph[0, 0], OBJECT_DISTANCE)
+    with pytest.raises(ValueError, match="3 images and 2 alphas"):
+        estimate_view_poses(oracle, rgbs, alphas[:2], CONFIG, sph[0, 0], OBJECT_DISTANCE)
+    empty_alpha = np.zeros_like(alphas[1])
+    with pytest.raises(PreprocessingError, match="view 1"):
+        estimate_view_poses(oracle, rgbs, [alphas[0], empty_alpha, alphas[2]], CONFIG, sph[0, 0], OBJECT_DISTANCE)
+
+
+def test_views_mosaic_puts_the_views_side_by_side_as_rgb8():
+    images = torch.full((3, 3, 4, 4), -1.0)
+    images[1] = 1.0
+    images[2, 0] = 0.0  # red channel at mid-grey
+    mosaic = views_mosaic(images)
+    assert mosaic.shape == (4, 12, 3) and mosaic.dtype == np.uint8
+    assert (mosaic[:, :4] == 0).all() and (mosaic[:, 4:8] == 255).all()
+    assert (mosaic[:, 8:, 0] == 128).all() and (mosaic[:, 8:, 1:] == 0).all()
+    with pytest.raises(ValueError, match=r"\(N, 3, S, S\)"):
+        views_mosaic(torch.zeros(3, 4, 4))
