@@ -11,7 +11,7 @@ import pickle
 import re
 import zipfile
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping
 
 import torch
 from diffusers import AutoencoderKL, DDIMScheduler, UNet2DConditionModel
@@ -55,21 +55,24 @@ def load_ldm_checkpoint(path: str | Path, config: Zero123Config | None = None, u
                if not any(key.startswith(prefix) for key in state)]
     if missing:
         raise ModelLoadError(file, f"not a Zero-1-to-3 checkpoint: no {', '.join(missing)} weights")
-    modules = _skeleton(config)
     parts = {
         "unet": convert_ldm_unet_checkpoint(state, dict(config.unet), extract_ema=use_ema),
         "vae": convert_ldm_vae_checkpoint(state, dict(config.vae)),
-        "image_encoder": clip_visual_to_transformers(state, CLIP_PREFIX),
         "cc_projection": {key[len(PROJECTION_PREFIX):]: value for key, value in state.items()
                           if key.startswith(PROJECTION_PREFIX)},
+        "image_encoder": clip_visual_to_transformers(state, CLIP_PREFIX),
     }
-    for name, part_state in parts.items():
+    loaded = {}
+    for name, empty_part in _empty_parts(config).items():
+        module = empty_part()
         try:
-            getattr(modules, name).load_state_dict(part_state, strict=True, assign=True)
+            module.load_state_dict(parts[name], strict=True, assign=True)
         except RuntimeError as error:
             lines = " ".join(str(error).split())
             raise ModelLoadError(file, f"{name} weights do not match the Zero-1-to-3 shapes: {lines[:400]}") from error
-    return modules
+        loaded[name] = module
+    return Zero123Modules(**loaded, scheduler=DDIMScheduler(**config.scheduler),
+                          clip_size=int(config.image_encoder["image_size"]))
 
 
 def read_state_dict(file: Path) -> dict[str, torch.Tensor]:
@@ -85,7 +88,7 @@ def read_state_dict(file: Path) -> dict[str, torch.Tensor]:
         raise ModelLoadError(
             file,
             "the checkpoint holds pickled Python objects besides tensors; unpickling them would execute "
-            f"code, which this project refuses (torch.load weights_only=True said: {str(error).splitlines()[0]})",
+            f"code, which this project refuses (torch.load weights_only=True: {_refused_global(error)})",
         ) from error
     except (RuntimeError, OSError, EOFError, ValueError) as error:
         raise ModelLoadError(file, f"not a readable checkpoint ({type(error).__name__}: {error})") from error
@@ -93,6 +96,12 @@ def read_state_dict(file: Path) -> dict[str, torch.Tensor]:
     if not isinstance(state, dict) or not all(isinstance(value, torch.Tensor) for value in state.values()):
         raise ModelLoadError(file, "the checkpoint is not a state_dict of tensors")
     return state
+
+
+def _refused_global(error: pickle.UnpicklingError) -> str:
+    """The Python object the weights-only unpickler refused, e.g. ``argparse.Namespace``."""
+    found = re.search(r"Unsupported global: GLOBAL ([\w.]+)", str(error))
+    return f"refused {found.group(1)}" if found else " ".join(str(error).split())[:200]
 
 
 def clip_visual_to_transformers(state: Mapping[str, torch.Tensor], prefix: str) -> dict[str, torch.Tensor]:
@@ -133,20 +142,23 @@ def _resblock(target: str, name: str, value: torch.Tensor) -> dict[str, torch.Te
     return {target + name: value}
 
 
-def _skeleton(config: Zero123Config) -> Zero123Modules:
-    """Parts without initialised weights (UNet, VAE, projection on ``meta``) for ``assign=True`` loading.
+def _empty_parts(config: Zero123Config) -> dict[str, Callable[[], torch.nn.Module]]:
+    """Builders of each part without initialised weights, for ``load_state_dict(assign=True)``.
 
-    The CLIP tower is built on the CPU because it owns a non-persistent ``position_ids`` buffer.
+    UNet, VAE and projection are built on ``meta``; the CLIP tower on the CPU because it owns a
+    non-persistent ``position_ids`` buffer that no checkpoint holds.
     """
-    with torch.device("meta"):
-        unet = UNet2DConditionModel(**config.unet)
-        vae = AutoencoderKL(**config.vae)
-        cc_projection = torch.nn.Linear(config.projection_in, config.projection_out)
-    return Zero123Modules(
-        unet=unet,
-        vae=vae,
-        image_encoder=CLIPVisionModelWithProjection(CLIPVisionConfig(**config.image_encoder)),
-        cc_projection=cc_projection,
-        scheduler=DDIMScheduler(**config.scheduler),
-        clip_size=int(config.image_encoder["image_size"]),
-    )
+
+    def on_meta(build: Callable[[], torch.nn.Module]) -> Callable[[], torch.nn.Module]:
+        def built() -> torch.nn.Module:
+            with torch.device("meta"):
+                return build()
+
+        return built
+
+    return {
+        "unet": on_meta(lambda: UNet2DConditionModel(**config.unet)),
+        "vae": on_meta(lambda: AutoencoderKL(**config.vae)),
+        "cc_projection": on_meta(lambda: torch.nn.Linear(config.projection_in, config.projection_out)),
+        "image_encoder": lambda: CLIPVisionModelWithProjection(CLIPVisionConfig(**config.image_encoder)),
+    }

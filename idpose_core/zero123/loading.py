@@ -187,4 +187,5 @@ def _write_json(file: Path, content: dict[str, Any]) -> None:
 def _summary(error: BaseException, limit: int = 400) -> str:
     """The library's message on one line, shortened: enough to see which tensor or file is wrong."""
     text = " ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
+    text = text.split(" You may consider adding `ignore_mismatched_sizes")[0]  # not an option for users here
     return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -1,0 +1,210 @@
+"""The original single-file (LDM) Zero-1-to-3 checkpoint loader, on a tiny checkpoint written here.
+
+The test renames a tiny diffusers model's weights to the latent-diffusion / OpenAI-CLIP names the
+released ``105000.ckpt`` / ``zero123-xl.ckpt`` use (``model.diffusion_model.input_blocks.1.0.in_layers.0``,
+``first_stage_model.encoder.down.0.block.0``, ``cond_stage_model.model.visual.transformer.resblocks.0.attn
+.in_proj_weight``, ``cc_projection.weight``, ...), saves it with ``torch.save`` as a Lightning-style
+``{"state_dict": ..., "global_step": ...}`` and loads it back through the converter.
+Reduced: Zero123Config.tiny instead of the full-size architecture.
+"""
+import re
+
+import pytest
+import torch
+
+from idpose_core.model_loading import load_predictor
+from idpose_core.zero123 import Zero123Config, Zero123Predictor
+
+RESNET_LDM = {"norm1": "in_layers.0", "conv1": "in_layers.2", "time_emb_proj": "emb_layers.1",
+              "norm2": "out_layers.0", "conv2": "out_layers.3", "conv_shortcut": "skip_connection"}
+VAE_ATTENTION_LDM = {"group_norm": "norm", "to_q": "q", "to_k": "k", "to_v": "v", "to_out.0": "proj_out"}
+CLIP_LAYER_LDM = {"layer_norm1": "ln_1", "layer_norm2": "ln_2", "mlp.fc1": "mlp.c_fc", "mlp.fc2": "mlp.c_proj",
+                  "self_attn.out_proj": "attn.out_proj"}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """Toy-sized ops gain nothing from threads and suffer badly on a busy shared CPU."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
+
+
+def rename(name, table):
+    """Replace the first dotted component sequence of ``name`` found in ``table``."""
+    for new, old in table.items():
+        if name.startswith(new + "."):
+            return old + name[len(new):]
+    return name
+
+
+def unet_to_ldm(state, layers_per_block):
+    """diffusers UNet2DConditionModel names -> openaimodel.UNetModel names (model.diffusion_model.*)."""
+    stride = layers_per_block + 1
+    fixed = {"time_embedding.linear_1": "time_embed.0", "time_embedding.linear_2": "time_embed.2",
+             "conv_in": "input_blocks.0.0", "conv_norm_out": "out.0", "conv_out": "out.2"}
+    up_with_attention = {int(k.split(".")[1]) for k in state if re.match(r"up_blocks\.\d+\.attentions", k)}
+    out = {}
+    for key, value in state.items():
+        head, leaf = key.rsplit(".", 1)
+        parts = key.split(".")
+        if head in fixed:
+            name = f"{fixed[head]}.{leaf}"
+        elif parts[0] == "down_blocks" and parts[2] == "downsamplers":
+            name = f"input_blocks.{(int(parts[1]) + 1) * stride}.0.op.{leaf}"
+        elif parts[0] == "up_blocks" and parts[2] == "upsamplers":
+            block = int(parts[1])
+            name = f"output_blocks.{block * stride + layers_per_block}.{2 if block in up_with_attention else 1}.conv.{leaf}"
+        elif parts[0] in ("down_blocks", "up_blocks"):
+            block, kind, layer, rest = int(parts[1]), parts[2], int(parts[3]), ".".join(parts[4:])
+            index = 1 + block * stride + layer if parts[0] == "down_blocks" else block * stride + layer
+            prefix = "input_blocks" if parts[0] == "down_blocks" else "output_blocks"
+            name = f"{prefix}.{index}.0.{rename(rest, RESNET_LDM)}" if kind == "resnets" else f"{prefix}.{index}.1.{rest}"
+        elif parts[0] == "mid_block":
+            kind, index, rest = parts[1], int(parts[2]), ".".join(parts[3:])
+            name = f"middle_block.{2 * index}.{rename(rest, RESNET_LDM)}" if kind == "resnets" else f"middle_block.1.{rest}"
+        else:
+            raise AssertionError(f"unmapped UNet key {key}")
+        out["model.diffusion_model." + name] = value
+    return out
+
+
+def vae_to_ldm(state, num_blocks):
+    """diffusers AutoencoderKL names -> ldm AutoencoderKL names (first_stage_model.*)."""
+    out = {}
+    for key, value in state.items():
+        name = key.replace("conv_norm_out", "norm_out")
+        name = re.sub(r"down_blocks\.(\d+)\.resnets\.", r"down.\1.block.", name)
+        name = re.sub(r"down_blocks\.(\d+)\.downsamplers\.0\.", r"down.\1.downsample.", name)
+        name = re.sub(r"up_blocks\.(\d+)\.resnets\.", lambda m: f"up.{num_blocks - 1 - int(m[1])}.block.", name)
+        name = re.sub(r"up_blocks\.(\d+)\.upsamplers\.0\.", lambda m: f"up.{num_blocks - 1 - int(m[1])}.upsample.", name)
+        name = re.sub(r"mid_block\.resnets\.(\d+)\.", lambda m: f"mid.block_{int(m[1]) + 1}.", name)
+        name = name.replace("conv_shortcut", "nin_shortcut")
+        if ".mid_block.attentions.0." in name:
+            coder, rest = name.split(".mid_block.attentions.0.")
+            name = f"{coder}.mid.attn_1.{rename(rest, VAE_ATTENTION_LDM)}"
+            if name.endswith("weight") and value.ndim == 2:
+                value = value[:, :, None, None]  # LDM uses 1x1 convolutions
+        out["first_stage_model." + name] = value
+    return out
+
+
+def clip_to_openai(state):
+    """transformers CLIPVisionModelWithProjection names -> OpenAI CLIP visual names (fused q/k/v)."""
+    out = {}
+    prefix = "cond_stage_model.model.visual."
+    for key, value in state.items():
+        name = key.removeprefix("vision_model.")
+        layer = re.match(r"encoder\.layers\.(\d+)\.(.+)", name)
+        if key == "visual_projection.weight":
+            out[prefix + "proj"] = value.t().contiguous()
+        elif layer and layer[2].startswith("self_attn.q_proj."):
+            kind = layer[2].rsplit(".", 1)[1]
+            base = f"encoder.layers.{layer[1]}.self_attn."
+            fused = torch.cat([state[f"vision_model.{base}{p}_proj.{kind}"] for p in "qkv"])
+            out[f"{prefix}transformer.resblocks.{layer[1]}.attn.in_proj_{kind}"] = fused
+        elif layer and re.match(r"self_attn\.[kv]_proj\.", layer[2]):
+            continue
+        elif layer:
+            out[f"{prefix}transformer.resblocks.{layer[1]}.{rename(layer[2], CLIP_LAYER_LDM)}"] = value
+        else:
+            name = {"embeddings.class_embedding": "class_embedding", "embeddings.patch_embedding.weight": "conv1.weight",
+                    "embeddings.position_embedding.weight": "positional_embedding"}.get(name, name)
+            out[prefix + name.replace("pre_layrnorm", "ln_pre").replace("post_layernorm", "ln_post")] = value
+    return out
+
+
+def ldm_state_dict(predictor):
+    modules, config = predictor.modules, Zero123Config.tiny()
+    state = {}
+    state.update(unet_to_ldm(modules.unet.state_dict(), config.unet["layers_per_block"]))
+    state.update(vae_to_ldm(modules.vae.state_dict(), len(config.vae["block_out_channels"])))
+    state.update(clip_to_openai(modules.image_encoder.state_dict()))
+    state.update({f"cc_projection.{k}": v for k, v in modules.cc_projection.state_dict().items()})
+    # The released files also carry the unused CLIP text tower's leftovers.
+    state["cond_stage_model.model.token_embedding.weight"] = torch.zeros(8, 4)
+    state["cond_stage_model.model.logit_scale"] = torch.tensor(4.6)
+    return {key: value.clone() for key, value in state.items()}
+
+
+@pytest.fixture(scope="module")
+def source():
+    return Zero123Predictor.tiny(seed=7)
+
+
+@pytest.fixture(scope="module")
+def checkpoint(source, tmp_path_factory):
+    file = tmp_path_factory.mktemp("ldm") / "zero123-tiny.ckpt"
+    torch.save({"state_dict": ldm_state_dict(source), "global_step": 105000, "epoch": 3}, file)
+    return file
+
+
+def errors_of(predictor):
+    generator = torch.Generator().manual_seed(0)
+    views = predictor.encode(torch.rand(2, 3, 32, 32, generator=generator) * 2 - 1)
+    noise = torch.randn(2, *views.noise_shape, generator=generator)
+    pose = torch.tensor([[0.3, 1.0, 0.1], [-0.2, 4.0, 0.0]])
+    return predictor.noise_error(views, torch.tensor([0, 1]), torch.tensor([1, 0]), pose, torch.tensor([200, 205]), noise)
+
+
+def assert_same_weights(loaded, source):
+    for name in ("unet", "vae", "image_encoder", "cc_projection"):
+        got, expected = (getattr(p.modules, name).state_dict() for p in (loaded, source))
+        assert got.keys() == expected.keys(), name
+        for key in expected:
+            torch.testing.assert_close(got[key], expected[key], rtol=0, atol=0, msg=f"{name}.{key}")
+
+
+def test_uses_the_original_key_names(checkpoint):
+    keys = torch.load(checkpoint, weights_only=True)["state_dict"].keys()
+    for expected in ("model.diffusion_model.input_blocks.1.0.in_layers.0.weight",
+                     "model.diffusion_model.output_blocks.2.1.conv.weight",
+                     "first_stage_model.encoder.mid.attn_1.q.weight",
+                     "cond_stage_model.model.visual.transformer.resblocks.0.attn.in_proj_weight",
+                     "cond_stage_model.model.visual.proj", "cc_projection.weight"):
+        assert expected in keys
+
+
+def test_checkpoint_loads_into_identical_modules(source, checkpoint):
+    loaded = Zero123Predictor.from_ldm_checkpoint(checkpoint, device="cpu", config=Zero123Config.tiny())
+    assert_same_weights(loaded, source)
+    torch.testing.assert_close(errors_of(loaded), errors_of(source), rtol=0, atol=0)
+
+
+def test_bare_state_dict_in_safetensors(source, tmp_path):
+    from safetensors.torch import save_file
+
+    file = tmp_path / "zero123-tiny.safetensors"
+    save_file({k: v.contiguous() for k, v in ldm_state_dict(source).items()}, file)
+    loaded = Zero123Predictor.from_ldm_checkpoint(file, config=Zero123Config.tiny())
+    torch.testing.assert_close(errors_of(loaded), errors_of(source), rtol=0, atol=0)
+
+
+def test_ema_weights_on_request(source, tmp_path):
+    """LDM keeps an EMA UNet under flattened names (model_ema.diffusion_modelinput_blocks00weight)."""
+    state = ldm_state_dict(source)
+    ema = {"model_ema." + k[len("model."):].replace(".", ""): v + 1.0 for k, v in state.items()
+           if k.startswith("model.diffusion_model.")}
+    file = tmp_path / "with-ema.ckpt"
+    torch.save({"state_dict": {**state, **ema}}, file)
+    plain = Zero123Predictor.from_ldm_checkpoint(file, config=Zero123Config.tiny())
+    averaged = Zero123Predictor.from_ldm_checkpoint(file, config=Zero123Config.tiny(), use_ema=True)
+    conv_in = source.modules.unet.conv_in.weight
+    torch.testing.assert_close(plain.modules.unet.conv_in.weight, conv_in, rtol=0, atol=0)
+    torch.testing.assert_close(averaged.modules.unet.conv_in.weight, conv_in + 1.0, rtol=0, atol=0)
+
+
+def test_full_size_config_is_the_default_and_refuses_a_tiny_file(checkpoint):
+    """load_predictor assumes the released architecture; a tiny file is reported as mis-shaped."""
+    with pytest.raises(ValueError, match="do not match the Zero-1-to-3 shapes") as caught:
+        load_predictor(str(checkpoint), device="cpu")
+    assert str(checkpoint) in str(caught.value)
+
+
+def test_missing_parts_are_named(source, tmp_path):
+    state = {k: v for k, v in ldm_state_dict(source).items() if not k.startswith("cond_stage_model.")}
+    file = tmp_path / "no-clip.ckpt"
+    torch.save({"state_dict": state}, file)
+    with pytest.raises(ValueError, match="no cond_stage_model.model.visual weights"):
+        Zero123Predictor.from_ldm_checkpoint(file, config=Zero123Config.tiny())

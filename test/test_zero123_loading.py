@@ -1,0 +1,176 @@
+"""Loading Zero-1-to-3 from a diffusers folder and through load_predictor; every bad path -> ModelLoadError.
+
+Reduced: the tiny random model (Zero123Config.tiny) stands in for the released weights.
+"""
+import argparse
+import json
+import shutil
+
+import pytest
+import torch
+from diffusers import UNet2DConditionModel
+from safetensors.torch import load_file, save_file
+
+from idpose_core.model_loading import load_predictor
+from idpose_core.zero123 import ModelLoadError, Zero123Config, Zero123Predictor
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """Toy-sized ops gain nothing from threads and suffer badly on a busy shared CPU."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
+
+
+@pytest.fixture(scope="module")
+def source():
+    return Zero123Predictor.tiny(seed=3)
+
+
+@pytest.fixture(scope="module")
+def saved(source, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("zero123-tiny")
+    source.save_pretrained(folder)
+    return folder
+
+
+@pytest.fixture
+def copy(saved, tmp_path):
+    """A scratch copy of the saved folder that a test may damage."""
+    return shutil.copytree(saved, tmp_path / "model")
+
+
+def errors_of(predictor):
+    """noise_error on fixed inputs: equal outputs mean equal weights and conditioning."""
+    generator = torch.Generator().manual_seed(0)
+    views = predictor.encode(torch.rand(2, 3, 32, 32, generator=generator) * 2 - 1)
+    noise = torch.randn(2, *views.noise_shape, generator=generator)
+    pose = torch.tensor([[0.3, 1.0, 0.1], [-0.2, 4.0, 0.0]])
+    return predictor.noise_error(views, torch.tensor([0, 1]), torch.tensor([1, 0]), pose, torch.tensor([200, 205]), noise)
+
+
+def test_layout_on_disk(saved):
+    expected = {"unet", "vae", "image_encoder", "cc_projection", "feature_extractor", "scheduler", "model_index.json"}
+    assert expected <= {p.name for p in saved.iterdir()}
+    assert not list(saved.rglob("*.bin")) and list(saved.rglob("*.safetensors"))
+    assert json.loads((saved / "cc_projection" / "config.json").read_text())["in_channel"] == 36
+    assert set(load_file(saved / "cc_projection" / "diffusion_pytorch_model.safetensors")) == {
+        "projection.weight", "projection.bias"}
+
+
+def test_round_trip_gives_identical_outputs(source, saved):
+    loaded = Zero123Predictor.from_pretrained(saved, device="cpu")
+    torch.testing.assert_close(errors_of(loaded), errors_of(source), rtol=0, atol=0)
+    assert loaded.modules.scheduler.config.beta_schedule == "scaled_linear"
+
+
+def test_load_predictor_dispatches_a_folder(source, saved):
+    predictor = load_predictor(str(saved), device="cpu", precision="float32")
+    assert isinstance(predictor, Zero123Predictor) and predictor.dtype == torch.float32
+    torch.testing.assert_close(errors_of(predictor), errors_of(source), rtol=0, atol=0)
+
+
+def test_bfloat16_precision_runs_close_to_float32(source, saved):
+    predictor = load_predictor(str(saved), device="cpu", precision="bfloat16")
+    assert predictor.modules.unet.dtype == torch.bfloat16 and predictor.modules.vae.dtype == torch.float32
+    torch.testing.assert_close(errors_of(predictor), errors_of(source), rtol=0.1, atol=0.05)
+
+
+def test_clip_camera_projection_layout_loads(source, copy):
+    """The bennyguo/ashawkey conversions name the projection folder and its Linear differently."""
+    weights = load_file(copy / "cc_projection" / "diffusion_pytorch_model.safetensors")
+    shutil.rmtree(copy / "cc_projection")
+    (copy / "clip_camera_projection").mkdir()
+    (copy / "clip_camera_projection" / "config.json").write_text(
+        json.dumps({"_class_name": "CLIPCameraProjection", "embedding_dim": 32, "additional_embeddings": 4}))
+    save_file({k.replace("projection.", "proj."): v for k, v in weights.items()},
+              copy / "clip_camera_projection" / "diffusion_pytorch_model.safetensors")
+    torch.testing.assert_close(errors_of(Zero123Predictor.from_pretrained(copy)), errors_of(source), rtol=0, atol=0)
+
+
+def test_projection_in_a_weights_only_pickle_loads(source, copy):
+    """Older conversions ship diffusion_pytorch_model.bin; it is read with weights_only=True."""
+    file = copy / "cc_projection" / "diffusion_pytorch_model.safetensors"
+    torch.save(load_file(file), copy / "cc_projection" / "diffusion_pytorch_model.bin")
+    file.unlink()
+    torch.testing.assert_close(errors_of(Zero123Predictor.from_pretrained(copy)), errors_of(source), rtol=0, atol=0)
+
+
+def expect_error(path, *fragments):
+    with pytest.raises(ModelLoadError) as caught:
+        load_predictor(str(path), device="cpu")
+    message = str(caught.value)
+    assert str(path) in message and "huggingface-cli download" in message
+    for fragment in fragments:
+        assert fragment in message, message
+
+
+def test_missing_folder(tmp_path):
+    expect_error(tmp_path / "nowhere", "no such folder or file")
+
+
+def test_empty_model_path():
+    with pytest.raises(ModelLoadError, match="empty"):
+        load_predictor("  ")
+
+
+def test_missing_part(copy):
+    shutil.rmtree(copy / "vae")
+    shutil.rmtree(copy / "cc_projection")
+    expect_error(copy, "missing part(s) vae, cc_projection")
+
+
+def test_missing_weight_file(copy):
+    (copy / "unet" / "diffusion_pytorch_model.safetensors").unlink()
+    expect_error(copy, "cannot load part 'unet'")
+
+
+def test_missing_weight_tensor_is_not_silently_initialised(copy):
+    file = copy / "image_encoder" / "model.safetensors"
+    weights = load_file(file)
+    del weights["visual_projection.weight"]
+    save_file(weights, file, metadata={"format": "pt"})
+    expect_error(copy, "image_encoder", "missing keys", "visual_projection.weight")
+
+
+def test_wrong_shapes_in_the_weights(copy):
+    file = copy / "unet" / "diffusion_pytorch_model.safetensors"
+    weights = load_file(file)
+    weights["conv_in.weight"] = weights["conv_in.weight"][:, :4].contiguous()
+    save_file(weights, file)
+    expect_error(copy, "unet", "conv_in.weight")
+
+
+def test_wrong_shapes_in_the_projection(copy):
+    file = copy / "cc_projection" / "diffusion_pytorch_model.safetensors"
+    weights = load_file(file)
+    weights["projection.weight"] = torch.zeros(32, 20)
+    save_file(weights, file)
+    expect_error(copy, "cc_projection", "does not match")
+
+
+def test_parts_that_do_not_fit_together(copy):
+    """A consistent 4-channel UNet (plain Stable Diffusion) is not Zero-1-to-3."""
+    UNet2DConditionModel(**{**Zero123Config.tiny().unet, "in_channels": 4}).save_pretrained(copy / "unet")
+    expect_error(copy, "in_channels 4 != 2 x vae latent_channels 4")
+
+
+def test_checkpoint_that_needs_code_execution(tmp_path):
+    file = tmp_path / "zero123.ckpt"
+    torch.save({"state_dict": {"cc_projection.weight": torch.zeros(2, 2)}, "hparams": argparse.Namespace(lr=1)}, file)
+    expect_error(file, "pickled Python objects", "weights_only")
+
+
+def test_checkpoint_without_zero123_parts(tmp_path):
+    file = tmp_path / "other.ckpt"
+    torch.save({"state_dict": {"model.diffusion_model.conv_in.weight": torch.zeros(1)}, "global_step": 5}, file)
+    expect_error(file, "not a Zero-1-to-3 checkpoint", "first_stage_model", "cc_projection")
+
+
+def test_unknown_file_type_and_bad_precision(tmp_path):
+    (tmp_path / "weights.txt").write_text("x")
+    expect_error(tmp_path / "weights.txt", "unknown model file type")
+    with pytest.raises(ValueError, match="precision"):
+        load_predictor(str(tmp_path), precision="float8")
