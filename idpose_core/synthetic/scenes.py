@@ -134,17 +134,14 @@ class SceneRenderer:
             ))
             positions.append(list((np.asarray(part.position) - centre) * factor))
             orientations.append(_quaternion(part.orientation_deg))
-        count = len(shapes) - 1
+        count = len(shapes)  # every part is a fixed link of an invisible base at the origin
         self._body = pybullet.createMultiBody(
             baseMass=0,
-            baseVisualShapeIndex=shapes[0],
-            basePosition=positions[0],
-            baseOrientation=orientations[0],
             linkMasses=[0] * count,
             linkCollisionShapeIndices=[-1] * count,
-            linkVisualShapeIndices=shapes[1:],
-            linkPositions=positions[1:],
-            linkOrientations=orientations[1:],
+            linkVisualShapeIndices=shapes,
+            linkPositions=positions,
+            linkOrientations=orientations,
             linkInertialFramePositions=[[0, 0, 0]] * count,
             linkInertialFrameOrientations=[[0, 0, 0, 1]] * count,
             linkParentIndices=[0] * count,
@@ -152,7 +149,7 @@ class SceneRenderer:
             linkJointAxis=[[0, 0, 1]] * count,
             physicsClientId=self._client,
         )
-        for link, part in enumerate(spec.parts, start=-1):
+        for link, part in enumerate(spec.parts):
             if part.texture is not None:
                 texture = pybullet.loadTexture(str(DATA_PATH / part.texture), physicsClientId=self._client)
                 pybullet.changeVisualShape(self._body, link, textureUniqueId=texture,
@@ -212,23 +209,22 @@ _PALETTE = (
 
 
 def _blob(index: int, rng: np.random.Generator) -> ObjectSpec:
-    """A ``random_urdfs`` blob in a random colour with a differently coloured marker cube on it.
+    """A ``random_urdfs`` blob, randomly turned and coloured, with a differently coloured marker cube.
 
-    The marker breaks any accidental symmetry of the blob and gives the views a colour cue.
+    The marker sits on a random vertex of the blob: it breaks any accidental symmetry of the blob
+    and gives the views a colour cue.
     """
     mesh = f"random_urdfs/{index:03d}/{index:03d}.obj"
-    vertices = _mesh_vertices(mesh)
-    low, high = vertices.min(axis=0), vertices.max(axis=0)
-    extent = float(np.max(high - low))
-    corner = rng.integers(0, 2, size=3)
-    marker_at = np.where(corner == 1, high, low) * np.array([1.0, 1.0, 0.5])
+    orientation = tuple(float(a) for a in rng.uniform(-180, 180, size=3))
+    vertices = _part_vertices(Part(mesh, orientation_deg=orientation))
+    extent = float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+    marker_at = vertices[int(rng.integers(len(vertices)))]
     body, marker = rng.choice(len(_PALETTE), size=2, replace=False)
     return ObjectSpec(
         name=f"blob_{index:03d}",
         parts=(
-            Part(mesh, rgba=_PALETTE[int(body)],
-                 orientation_deg=tuple(float(a) for a in rng.uniform(-180, 180, size=3))),
-            Part("cube.obj", rgba=_PALETTE[int(marker)], scale=(0.35 * extent,) * 3,
+            Part(mesh, rgba=_PALETTE[int(body)], orientation_deg=orientation),
+            Part("cube.obj", rgba=_PALETTE[int(marker)], scale=(0.3 * extent,) * 3,
                  position=tuple(float(x) for x in marker_at)),
         ),
     )
