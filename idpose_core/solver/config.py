@@ -18,8 +18,9 @@ class SolverConfig:
     ``variant``: "naive" (pairs independent), "tr" (triangular refinement), "full" (triangular
     exploration and refinement). Timesteps are fractions of the predictor's training steps.
     Learning rates suit Zero-1-to-3's noise error; a predictor with a steeper error (e.g. the render
-    oracle) needs smaller ones. ``ambiguity_deg``/``ambiguity_margin`` define when a view is flagged
-    ambiguous (see ``idpose_core.solver.scoring``).
+    oracle) needs smaller ones. ``runner_up_steps`` (per view) polish each view's runner-up candidate
+    before ``ambiguity_deg``/``ambiguity_margin`` decide whether the view is flagged ambiguous (see
+    ``idpose_core.solver.scoring``).
     """
 
     variant: str = "full"
@@ -37,6 +38,7 @@ class SolverConfig:
     average_last: int = 20
     max_batch: int = 64
     seed: int = 0
+    runner_up_steps: int = 100
     ambiguity_deg: float = 30.0
     ambiguity_margin: float = 0.1
 
@@ -46,7 +48,7 @@ class SolverConfig:
         presets = {
             "default": {},
             "fast": dict(probe_batch=4, adjust_steps=5, keep_top=3, refine_steps_per_view=150,
-                         average_last=10),
+                         average_last=10, runner_up_steps=30),
         }
         if name not in presets:
             raise ValueError(f"unknown solver preset {name!r}; choose one of {sorted(presets)}")
@@ -63,7 +65,7 @@ class SolverConfig:
         need(self.variant in VARIANTS, "variant", f"one of {VARIANTS}")
         for name in ("azimuth_candidates", "probe_batch", "keep_top", "average_last", "max_batch"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 1, name, "an integer >= 1")
-        for name in ("adjust_steps", "refine_steps_per_view", "seed"):
+        for name in ("adjust_steps", "refine_steps_per_view", "runner_up_steps", "seed"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 0, name, "an integer >= 0")
         for name in ("adjust_lr", "refine_lr", "ambiguity_deg", "ambiguity_margin"):
             value = getattr(self, name)

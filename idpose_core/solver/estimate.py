@@ -75,7 +75,7 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
 
     candidates = timed("exploration", lambda: explore(context, len(images)))
     start = timed("selection", lambda: select(context, candidates))
-    poses = timed("refinement", lambda: refine(context, start))
+    poses = timed("refinement", lambda: refine(context, start, config.variant, config.refine_steps_per_view))
     poses[:, 1] = wrap_azimuth(poses[:, 1])
     scores, runner_poses, runner_scores, ambiguous = timed("scoring", lambda: score(context, poses, candidates))
     runner_poses[:, 1] = wrap_azimuth(runner_poses[:, 1])

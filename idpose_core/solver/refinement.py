@@ -32,21 +32,22 @@ def mean_pose(iterates: torch.Tensor) -> torch.Tensor:
     return torch.stack([mean[0], circular_mean(iterates[:, 1]), mean[2]])
 
 
-def refine(ctx: SolverContext, start: torch.Tensor) -> torch.Tensor:
+def refine(ctx: SolverContext, start: torch.Tensor, variant: str, steps_per_view: int,
+           stage: str = "refinement") -> torch.Tensor:
     """Refined poses (N-1, 3) from start poses (N-1, 3), anchor to views 1..N-1.
 
-    Step s takes pair (i, j) = schedule[s mod len]: i = 0 updates p_j with ``l(p_j; x0, xj)``;
+    Runs ``steps_per_view * (N-1)`` steps over ``pair_schedule(N, variant)``. Step s takes pair (i, j) = schedule[s mod len]: i = 0 updates p_j with ``l(p_j; x0, xj)``;
     j = 0 updates p_i with ``l(p'_i; xi, x0)``; otherwise a seeded coin holds one of p_i, p_j fixed
     and the other is updated with ``l(p'_i + p_j; xi, xj)``. Each step: one sample, fresh noise and
     t, one SGD step at ``refine_lr``. A view's answer is the mean of its last ``average_last`` iterates.
     """
     config = ctx.config
     count = len(start) + 1
-    steps = config.refine_steps_per_view * (count - 1)
-    ctx.begin_stage("refinement", steps)
+    steps = steps_per_view * (count - 1)
+    ctx.begin_stage(stage, steps)
     if steps == 0:
         return start.clone()
-    schedule = pair_schedule(count, config.variant)
+    schedule = pair_schedule(count, variant)
     poses = start.to(ctx.device).clone().requires_grad_(True)
     optimiser = torch.optim.SGD([poses], lr=config.refine_lr)
     history: list[list[torch.Tensor]] = [[] for _ in range(count - 1)]

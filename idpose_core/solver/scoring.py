@@ -1,9 +1,11 @@
 """Final scores, runner-ups and the ambiguity flag per view.
 
-Rule: the runner-up of view i is the lowest-error candidate probed during exploration whose pose
-differs from the answer by more than ``ambiguity_deg`` (in polar or in circular azimuth). View i is
-*ambiguous* when ``runner_up_score - score <= ambiguity_margin * (worst_probe - score)``: the far
-candidate is almost as good as the answer, measured against the spread of errors over the whole
+Rule: the runner-up of view i starts as the lowest-error candidate probed during exploration whose
+pose differs from the answer by more than ``ambiguity_deg`` (in polar or in circular azimuth); it is
+then polished with ``runner_up_steps`` pairwise refinement steps per view, so that it sits at the
+bottom of its own basin as the answer does. View i is *ambiguous* when the polished runner-up is
+still far from the answer and ``runner_up_score - score <= ambiguity_margin * (worst_probe - score)``:
+a distinct minimum almost as deep as the answer's, measured against the spread of errors over the
 candidate grid. All errors are taken under the same fixed probe noise, so they compare directly;
 mirror or rotationally symmetric objects give such near-equal far minima.
 """
@@ -15,6 +17,7 @@ import torch
 
 from idpose_core.solver.context import SolverContext
 from idpose_core.solver.exploration import ViewCandidates
+from idpose_core.solver.refinement import refine
 
 
 def pose_distance(first: torch.Tensor, second: torch.Tensor) -> torch.Tensor:
@@ -24,24 +27,37 @@ def pose_distance(first: torch.Tensor, second: torch.Tensor) -> torch.Tensor:
     return torch.maximum(polar, torch.minimum(azimuth, 2.0 * math.pi - azimuth))
 
 
+def runner_up_starts(poses: torch.Tensor, candidates: list[ViewCandidates], limit: float) -> torch.Tensor:
+    """Per view the best pool candidate farther than ``limit`` from its answer (N-1, 3); NaN rows if none."""
+    starts = torch.full_like(poses, math.nan)
+    for view, (pose, found) in enumerate(zip(poses, candidates)):
+        far = pose_distance(found.pool_poses, pose) > limit
+        if far.any():
+            errors = torch.where(far, found.pool_errors, torch.full_like(found.pool_errors, math.inf))
+            starts[view] = found.pool_poses[int(torch.argmin(errors))]
+    return starts
+
+
 def score(ctx: SolverContext, poses: torch.Tensor, candidates: list[ViewCandidates]
           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Scores (N-1,), runner-up poses (N-1, 3), runner-up scores (N-1,) and ambiguity flags (N-1,)."""
+    config = ctx.config
+    limit = math.radians(config.ambiguity_deg)
+    starts = runner_up_starts(poses, candidates, limit)
+    found = ~torch.isnan(starts[:, 0])
+    # views without a far candidate polish their own answer (refinement runs over all views at once)
+    runners = refine(ctx, torch.where(found[:, None], starts, poses), "naive", config.runner_up_steps,
+                     stage="runner-up")
+
     count = len(poses)
-    ctx.begin_stage("scoring", count * 2 * ctx.config.probe_batch)
-    views = torch.arange(1, count + 1)
-    scores = ctx.pairwise_errors(torch.zeros_like(views), views, poses)
-    runner_poses = torch.full((count, 3), math.nan)
-    runner_scores = torch.full((count,), math.nan)
-    ambiguous = torch.zeros(count, dtype=torch.bool)
-    limit = math.radians(ctx.config.ambiguity_deg)
-    for view, (pose, found) in enumerate(zip(poses, candidates)):
-        far = pose_distance(found.pool_poses, pose) > limit
-        if not far.any():
-            continue
-        errors = torch.where(far, found.pool_errors, torch.full_like(found.pool_errors, math.inf))
-        best = int(torch.argmin(errors))
-        runner_poses[view], runner_scores[view] = found.pool_poses[best], errors[best]
-        spread = float(found.pool_errors.max()) - float(scores[view])
-        ambiguous[view] = bool(errors[best] - scores[view] <= ctx.config.ambiguity_margin * spread)
-    return scores, runner_poses, runner_scores, ambiguous
+    ctx.begin_stage("scoring", 2 * count * 2 * config.probe_batch)
+    views = torch.arange(1, count + 1).repeat(2)
+    errors = ctx.pairwise_errors(torch.zeros_like(views), views, torch.cat([poses, runners]))
+    scores = errors[:count]
+    runners[~found] = math.nan
+    runner_scores = torch.where(found, errors[count:], torch.full((count,), math.nan))
+
+    spread = torch.stack([c.pool_errors.max() for c in candidates]) - scores
+    still_far = pose_distance(runners, poses) > limit
+    close = runner_scores - scores <= config.ambiguity_margin * spread
+    return scores, runners, runner_scores, found & still_far & close
