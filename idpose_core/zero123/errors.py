@@ -6,8 +6,8 @@ from pathlib import Path
 DOWNLOAD_HINT = (
     "Get Zero-1-to-3 weights on a machine with internet, e.g. "
     "`huggingface-cli download kxic/zero123-xl --local-dir zero123-xl` (diffusers folder) or "
-    "zero123-xl.ckpt from https://huggingface.co/cvlab/zero123-weights, and set model_path to the "
-    "folder or .ckpt (README: 'Zero-1-to-3 weights')."
+    "the original 105000.ckpt from https://huggingface.co/cvlab/zero123-weights, and set model_path "
+    "to the folder or .ckpt (README: 'Zero-1-to-3 weights')."
 )
 
 

@@ -1,0 +1,251 @@
+"""What one ID-Pose step costs on this CPU: this project's way vs the official implementation's way.
+
+Full-size Zero-1-to-3 architecture with random weights (the cost does not depend on the values),
+float32, 256 px images. Each measurement runs in its own subprocess, so its peak memory
+(``ru_maxrss``: weights + activations + gradients) is its own; the kinds alternate in one run.
+
+What is measured (one "step" = what the solvers do per refinement iteration):
+- ours_step: the solver's refinement step. Views were encoded once beforehand (VAE + CLIP, not
+  timed); one ``noise_error`` sample (one direction, fresh noise, t in [200, 210]) forward and
+  backward to the pose only (all weights frozen, no gradient checkpointing).
+- official_step: the same modules run as the official code runs a step: VAE-encode the reference
+  (mode) and the target (sample x 0.18215) and CLIP-encode the reference again, then the UNet
+  forward + backward with weight gradients enabled on the UNet and cc_projection and gradient
+  checkpointing on the UNet; an EMA copy of the UNet is held in memory as the LDM model object does.
+- ours_probe / official_probe: one exploration probe = one pose candidate in one direction under
+  16 noise samples at t = 200, forward only (no grad) - ours from cached views, official
+  re-encoding 16 reference + 16 target images through the VAE and 16 references through CLIP.
+Steps: one untimed warm-up, then ``--repeats`` timed steps (mean). Probes: one timed probe.
+
+Usage: python bench/step_cost.py [--alternations 2] [--repeats 2] [--threads 2] [--config full|tiny]
+Writes bench/results/step_cost.json and prints the figures and the ratios.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from idpose_core.zero123 import Zero123Config, Zero123Predictor  # noqa: E402
+
+KINDS = ("ours_step", "official_step", "ours_probe", "official_probe")
+PROBE_BATCH = 16
+PROBE_T = 200
+REFINE_T = (200, 210)
+
+
+def main() -> None:
+    args = parse_args()
+    if args.child:
+        print("RESULT " + json.dumps(measure(args.child, args)), flush=True)
+        return
+    runs = {kind: [] for kind in KINDS}
+    load_before = os.getloadavg()
+    total = args.alternations * len(KINDS)
+    for alternation in range(args.alternations):
+        for kind in KINDS:
+            done = alternation * len(KINDS) + KINDS.index(kind)
+            print(f"[{100 * done // total:3d}%] alternation {alternation + 1}/{args.alternations}: {kind} ...", flush=True)
+            result = run_child(kind, args)
+            runs[kind].append(result)
+            print(f"       {kind}: {result['seconds']:.2f} s, peak {result['peak_gb']:.2f} GB "
+                  f"(after building {result['built_gb']:.2f} GB)", flush=True)
+    report = summarise(runs, args, load_before)
+    print_summary(report)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--alternations", type=int, default=2, help="rounds of the four kinds, interleaved")
+    parser.add_argument("--repeats", type=int, default=2, help="timed steps per step measurement")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--size", type=int, default=256, help="image side in pixels")
+    parser.add_argument("--config", choices=("full", "tiny"), default="full", help="tiny: smoke test only")
+    parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "step_cost.json"))
+    parser.add_argument("--child", choices=KINDS, help=argparse.SUPPRESS)
+    return parser.parse_args()
+
+
+def run_child(kind: str, args: argparse.Namespace) -> dict:
+    """One measurement in a fresh interpreter; its stdout carries one RESULT line."""
+    command = [sys.executable, str(Path(__file__).resolve()), "--child", kind, "--repeats", str(args.repeats),
+               "--threads", str(args.threads), "--size", str(args.size), "--config", args.config]
+    completed = subprocess.run(command, cwd=ROOT, capture_output=True, text=True,
+                               env={**os.environ, "PYTHONPATH": str(ROOT)})
+    lines = [line for line in completed.stdout.splitlines() if line.startswith("RESULT ")]
+    if completed.returncode != 0 or not lines:
+        raise RuntimeError(f"{kind} measurement failed:\n{completed.stderr[-3000:]}")
+    return json.loads(lines[-1][len("RESULT "):])
+
+
+def measure(kind: str, args: argparse.Namespace) -> dict:
+    """Build the model, then time ``kind``; returns seconds and memory of this process."""
+    torch.set_num_threads(args.threads)
+    config = Zero123Config.full() if args.config == "full" else Zero123Config.tiny()
+    predictor = Zero123Predictor.random(config, seed=0, device="cpu", dtype=torch.float32)
+    generator = torch.Generator().manual_seed(0)
+    images = torch.rand(2, 3, args.size, args.size, generator=generator) * 2 - 1
+    official = kind.startswith("official")
+    if official:
+        ema = prepare_official(predictor)
+    built_gb = current_rss_gb()
+    if kind == "ours_step":
+        views = predictor.encode(images)
+        run = lambda: ours_step(predictor, views, generator)  # noqa: E731
+    elif kind == "official_step":
+        run = lambda: official_step(predictor, images, generator)  # noqa: E731
+    elif kind == "ours_probe":
+        views = predictor.encode(images)
+        run = lambda: ours_probe(predictor, views, generator)  # noqa: E731
+    else:
+        run = lambda: official_probe(predictor, images, generator)  # noqa: E731
+    timings = []
+    repeats = args.repeats if kind.endswith("step") else 1
+    if kind.endswith("step"):
+        run()  # warm-up
+    for _ in range(repeats):
+        timings.append(run())
+    result = {
+        "seconds": statistics.mean(t["total"] for t in timings),
+        "parts": {part: statistics.mean(t[part] for t in timings) for part in timings[0]},
+        "repeats": repeats,
+        "built_gb": built_gb,
+        "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2,
+    }
+    if official:
+        result["ema_parameters"] = sum(p.numel() for p in ema.parameters())
+    return result
+
+
+def prepare_official(predictor):
+    """The official training-style model state: UNet and cc_projection trainable, checkpointed, plus EMA."""
+    modules = predictor.modules
+    modules.unet.requires_grad_(True)
+    modules.cc_projection.requires_grad_(True)
+    modules.unet.enable_gradient_checkpointing()
+    return copy.deepcopy(modules.unet).requires_grad_(False)
+
+
+def ours_step(predictor, views, generator) -> dict:
+    """One refinement step as the solver runs it: 1 sample, pose-only gradient, cached views."""
+    start = time.perf_counter()
+    pose = torch.tensor([[0.2, 1.0, 0.0]], requires_grad=True)
+    t = torch.randint(REFINE_T[0], REFINE_T[1] + 1, (1,), generator=generator)
+    noise = torch.randn(1, *views.noise_shape, generator=generator)
+    predictor.noise_error(views, torch.tensor([0]), torch.tensor([1]), pose, t, noise).sum().backward()
+    return {"total": time.perf_counter() - start}
+
+
+def official_encode(predictor, ref_images, tgt_images, generator):
+    """Per-step conditioning the official way: VAE on both images, CLIP on the reference."""
+    modules = predictor.modules
+    with torch.no_grad():
+        ref_latents = modules.vae.encode(ref_images).latent_dist.mode()
+        tgt_latents = modules.vae.encode(tgt_images).latent_dist.sample(generator) * modules.vae.config.scaling_factor
+        embeds = modules.image_encoder(pixel_values=predictor.clip_pixels(ref_images)).image_embeds
+    return ref_latents, tgt_latents, embeds
+
+
+def official_step(predictor, images, generator) -> dict:
+    """One official refinement step: re-encode, then UNet forward + backward with weight gradients."""
+    start = time.perf_counter()
+    ref_latents, tgt_latents, embeds = official_encode(predictor, images[:1], images[1:], generator)
+    encoded = time.perf_counter()
+    pose = torch.tensor([[0.2, 1.0, 0.0]], requires_grad=True)
+    t = torch.randint(REFINE_T[0], REFINE_T[1] + 1, (1,), generator=generator)
+    noise = torch.randn(tgt_latents.shape, generator=generator)
+    noisy = predictor.modules.scheduler.add_noise(tgt_latents, noise, t)
+    eps = predictor.predict_noise(noisy, ref_latents, t, predictor.pose_tokens(embeds, pose))
+    (eps - noise).square().mean().backward()
+    end = time.perf_counter()
+    return {"total": end - start, "encode": encoded - start, "unet_forward_backward": end - encoded}
+
+
+def ours_probe(predictor, views, generator) -> dict:
+    """One probe: one candidate, one direction, 16 noises, forward only, cached views."""
+    start = time.perf_counter()
+    pose = torch.tensor([[0.2, 1.0, 0.0]]).expand(PROBE_BATCH, 3)
+    noise = torch.randn(PROBE_BATCH, *views.noise_shape, generator=generator)
+    index = torch.zeros(PROBE_BATCH, dtype=torch.long)
+    with torch.no_grad():
+        predictor.noise_error(views, index, index + 1, pose, torch.full((PROBE_BATCH,), PROBE_T), noise)
+    return {"total": time.perf_counter() - start}
+
+
+def official_probe(predictor, images, generator) -> dict:
+    """One official probe: 16 repeated reference and target images re-encoded, UNet forward on 16."""
+    start = time.perf_counter()
+    refs, tgts = images[:1].expand(PROBE_BATCH, -1, -1, -1), images[1:].expand(PROBE_BATCH, -1, -1, -1)
+    ref_latents, tgt_latents, embeds = official_encode(predictor, refs, tgts, generator)
+    encoded = time.perf_counter()
+    with torch.no_grad():
+        t = torch.full((PROBE_BATCH,), PROBE_T)
+        noise = torch.randn(tgt_latents.shape, generator=generator)
+        noisy = predictor.modules.scheduler.add_noise(tgt_latents, noise, t)
+        pose = torch.tensor([[0.2, 1.0, 0.0]]).expand(PROBE_BATCH, 3)
+        eps = predictor.predict_noise(noisy, ref_latents, t, predictor.pose_tokens(embeds, pose))
+        (eps - noise).square().mean(dim=(1, 2, 3))
+    end = time.perf_counter()
+    return {"total": end - start, "encode": encoded - start, "unet_forward": end - encoded}
+
+
+def current_rss_gb() -> float:
+    """Resident memory now (Linux /proc), in GiB."""
+    pages = int(Path("/proc/self/statm").read_text().split()[1])
+    return pages * os.sysconf("SC_PAGE_SIZE") / 1024**3
+
+
+def summarise(runs: dict, args: argparse.Namespace, load_before: tuple) -> dict:
+    """Medians per kind, the official/ours ratios, and the machine the figures come from."""
+    median = {kind: {"seconds": statistics.median(r["seconds"] for r in results),
+                     "peak_gb": statistics.median(r["peak_gb"] for r in results)}
+              for kind, results in runs.items()}
+    ratios = {
+        f"{what}_{unit}": median[f"official_{what}"][unit] / median[f"ours_{what}"][unit]
+        for what in ("step", "probe") for unit in ("seconds", "peak_gb")
+    }
+    return {
+        "machine": {"cpus": os.cpu_count(), "threads": args.threads, "platform": platform.platform(),
+                    "torch": torch.__version__, "load_average_before": load_before,
+                    "load_average_after": os.getloadavg()},
+        "setup": {"config": args.config, "image_size": args.size, "dtype": "float32", "weights": "random",
+                  "alternations": args.alternations, "repeats_per_step_measurement": args.repeats,
+                  "probe_batch": PROBE_BATCH, "definitions": __doc__.split("What is measured")[1].split("Usage:")[0]},
+        "runs": runs,
+        "median": median,
+        "ratio_official_over_ours": ratios,
+    }
+
+
+def print_summary(report: dict) -> None:
+    median, ratio = report["median"], report["ratio_official_over_ours"]
+    print(f"\n{'kind':<16}{'seconds':>10}{'peak GB':>10}")
+    for kind, figures in median.items():
+        print(f"{kind:<16}{figures['seconds']:>10.2f}{figures['peak_gb']:>10.2f}")
+    official_parts = report["runs"]["official_step"][0]["parts"]
+    print("official step split (first run): " + ", ".join(f"{k} {v:.2f} s" for k, v in official_parts.items()))
+    print(f"step:  official / ours = {ratio['step_seconds']:.2f}x time, {ratio['step_peak_gb']:.2f}x peak memory")
+    print(f"probe: official / ours = {ratio['probe_seconds']:.2f}x time, {ratio['probe_peak_gb']:.2f}x peak memory")
+    load = report["machine"]
+    print(f"load average before {load['load_average_before']}, after {load['load_average_after']} "
+          f"({load['cpus']} CPUs, {load['threads']} threads)")
+
+
+if __name__ == "__main__":
+    main()
