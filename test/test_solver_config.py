@@ -1,0 +1,52 @@
+"""SolverConfig: paper defaults, presets, range checks naming the field, polar candidates."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from idpose_core.solver import SolverConfig
+
+
+def test_defaults_are_the_official_settings():
+    config = SolverConfig()
+    assert (config.azimuth_candidates, config.probe_batch, config.probe_t) == (8, 16, 0.2)
+    assert (config.adjust_steps, config.adjust_lr, config.keep_top) == (10, 10.0, 5)
+    assert (config.refine_steps_per_view, config.refine_lr, config.refine_t_range) == (600, 1.0, (0.2, 0.21))
+    assert config.average_last == 20 and config.variant == "full"
+    assert SolverConfig.preset("default") == config
+
+
+def test_fast_preset_is_cheaper_and_accepts_overrides():
+    fast = SolverConfig.preset("fast", seed=3)
+    assert fast.seed == 3
+    assert fast.refine_steps_per_view < SolverConfig().refine_steps_per_view
+    assert fast.probe_batch < SolverConfig().probe_batch
+    with pytest.raises(ValueError, match="unknown solver preset"):
+        SolverConfig.preset("turbo")
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("variant", "pairwise"), ("azimuth_candidates", 0), ("probe_batch", 0), ("probe_t", 1.0),
+        ("adjust_steps", -1), ("adjust_lr", 0.0), ("keep_top", 0), ("refine_lr", math.nan),
+        ("refine_t_range", (0.3, 0.2)), ("average_last", 0), ("max_batch", 0), ("seed", -1),
+        ("polar_candidates_deg", ()), ("polar_candidates_deg", (200.0,)), ("anchor_polar_deg", 180.0),
+        ("runner_up_steps", -2), ("ambiguity_margin", -0.1),
+    ],
+)
+def test_out_of_range_fields_are_named(field, value):
+    with pytest.raises(ValueError, match=field):
+        replace(SolverConfig(), **{field: value}).validate()
+
+
+def test_polar_candidates_default_given_and_from_the_anchor():
+    assert np.allclose(np.degrees(SolverConfig().polar_candidates()), [-120, -60, 0, 60, 120])
+    assert np.allclose(np.degrees(SolverConfig(polar_candidates_deg=(10.0,)).polar_candidates()), [10])
+    from_anchor = np.degrees(SolverConfig(anchor_polar_deg=60.0).polar_candidates())
+    assert 0.0 in from_anchor
+    assert np.allclose(np.diff(np.sort(from_anchor)), 45.0)
+    absolute = 60.0 + from_anchor
+    assert absolute.min() > 0.0 and absolute.max() < 180.0
+    assert absolute.min() - 45.0 <= 0.0 and absolute.max() + 45.0 >= 180.0, "must cover the whole range"
