@@ -5,7 +5,6 @@ import threading
 import time
 from collections.abc import Sequence
 
-import numpy as np
 import torch
 
 from idpose_core.predictor import NoisePredictor

@@ -37,7 +37,7 @@ def scaled_linear_alphas_cumprod() -> torch.Tensor:
     return scheduler.alphas_cumprod.to(torch.float32)
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=16)
 def render_grid(spec: ObjectSpec, step_deg: float, latent_size: int, render_size: int) -> torch.Tensor:
     """Renders on the (polar, azimuth) grid, (P, A, 3, s, s) float32 in [-1, 1]; cached per object.
 
