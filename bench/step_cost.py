@@ -16,6 +16,8 @@ What is measured (one "step" = what the solvers do per refinement iteration):
   16 noise samples at t = 200, forward only (no grad) - ours from cached views, official
   re-encoding 16 reference + 16 target images through the VAE and 16 references through CLIP.
 Steps: one untimed warm-up, then ``--repeats`` timed steps (mean). Probes: one timed probe.
+Wall seconds and process CPU seconds (all threads) are both kept: on a shared machine the CPU
+time is the steadier figure; each measurement also records the 1-minute load average.
 
 Usage: python bench/step_cost.py [--alternations 2] [--repeats 2] [--threads 2] [--config full|tiny]
 Writes bench/results/step_cost.json and prints the figures and the ratios.
@@ -60,8 +62,9 @@ def main() -> None:
             print(f"[{100 * done // total:3d}%] alternation {alternation + 1}/{args.alternations}: {kind} ...", flush=True)
             result = run_child(kind, args)
             runs[kind].append(result)
-            print(f"       {kind}: {result['seconds']:.2f} s, peak {result['peak_gb']:.2f} GB "
-                  f"(after building {result['built_gb']:.2f} GB)", flush=True)
+            print(f"       {kind}: {result['seconds']:.2f} s ({result['cpu_seconds']:.2f} CPU s), peak "
+                  f"{result['peak_gb']:.2f} GB (after building {result['built_gb']:.2f} GB), "
+                  f"load {result['load_average']:.1f}", flush=True)
     report = summarise(runs, args, load_before)
     print_summary(report)
     out = Path(args.out)
@@ -120,9 +123,13 @@ def measure(kind: str, args: argparse.Namespace) -> dict:
     if kind.endswith("step"):
         run()  # warm-up
     for _ in range(repeats):
+        cpu_start = time.process_time()
         timings.append(run())
+        timings[-1]["cpu"] = time.process_time() - cpu_start
     result = {
         "seconds": statistics.mean(t["total"] for t in timings),
+        "cpu_seconds": statistics.mean(t["cpu"] for t in timings),
+        "load_average": os.getloadavg()[0],
         "parts": {part: statistics.mean(t[part] for t in timings) for part in timings[0]},
         "repeats": repeats,
         "built_gb": built_gb,
@@ -213,12 +220,12 @@ def current_rss_gb() -> float:
 
 def summarise(runs: dict, args: argparse.Namespace, load_before: tuple) -> dict:
     """Medians per kind, the official/ours ratios, and the machine the figures come from."""
-    median = {kind: {"seconds": statistics.median(r["seconds"] for r in results),
-                     "peak_gb": statistics.median(r["peak_gb"] for r in results)}
+    units = ("seconds", "cpu_seconds", "peak_gb")
+    median = {kind: {unit: statistics.median(r[unit] for r in results) for unit in units}
               for kind, results in runs.items()}
     ratios = {
         f"{what}_{unit}": median[f"official_{what}"][unit] / median[f"ours_{what}"][unit]
-        for what in ("step", "probe") for unit in ("seconds", "peak_gb")
+        for what in ("step", "probe") for unit in units
     }
     return {
         "machine": {"cpus": os.cpu_count(), "threads": args.threads, "platform": platform.platform(),
@@ -235,13 +242,14 @@ def summarise(runs: dict, args: argparse.Namespace, load_before: tuple) -> dict:
 
 def print_summary(report: dict) -> None:
     median, ratio = report["median"], report["ratio_official_over_ours"]
-    print(f"\n{'kind':<16}{'seconds':>10}{'peak GB':>10}")
+    print(f"\n{'kind':<16}{'seconds':>10}{'CPU s':>10}{'peak GB':>10}")
     for kind, figures in median.items():
-        print(f"{kind:<16}{figures['seconds']:>10.2f}{figures['peak_gb']:>10.2f}")
+        print(f"{kind:<16}{figures['seconds']:>10.2f}{figures['cpu_seconds']:>10.2f}{figures['peak_gb']:>10.2f}")
     official_parts = report["runs"]["official_step"][0]["parts"]
     print("official step split (first run): " + ", ".join(f"{k} {v:.2f} s" for k, v in official_parts.items()))
-    print(f"step:  official / ours = {ratio['step_seconds']:.2f}x time, {ratio['step_peak_gb']:.2f}x peak memory")
-    print(f"probe: official / ours = {ratio['probe_seconds']:.2f}x time, {ratio['probe_peak_gb']:.2f}x peak memory")
+    for what in ("step", "probe"):
+        print(f"{what + ':':<7}official / ours = {ratio[what + '_seconds']:.2f}x time "
+              f"({ratio[what + '_cpu_seconds']:.2f}x CPU time), {ratio[what + '_peak_gb']:.2f}x peak memory")
     load = report["machine"]
     print(f"load average before {load['load_average_before']}, after {load['load_average_after']} "
           f"({load['cpus']} CPUs, {load['threads']} threads)")
