@@ -1,0 +1,81 @@
+"""The small view-conditioned diffusion model: Zero-1-to-3's parts at toy size, in pixel space.
+
+Parts (same classes as Zero-1-to-3): a diffusers ``UNet2DConditionModel`` noise predictor, a
+transformers ``CLIPVisionModelWithProjection`` reference encoder, and ``cc_projection`` (Linear
+embedding + 4 -> embedding) producing the single cross-attention token. Deviation: the pose's
+Fourier features also enter the timestep embedding through the UNet's projection class embedding.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from diffusers import DDPMScheduler, UNet2DConditionModel
+from safetensors.torch import load_file, save_file
+from torch import nn
+from transformers import CLIPVisionModelWithProjection
+
+from idpose_core.demo_model.config import ZERO123_POSE_DIM, DemoModelConfig
+from idpose_core.demo_model.pose_features import fourier_pose_features
+from idpose_core.zero123.predictor import pose_features
+
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+
+
+class DemoDiffusionModel(nn.Module):
+    """Noise predictor ``f(x_t, x_ref, p, t)`` on ``config.resolution``-pixel RGB images in [-1, 1]."""
+
+    def __init__(self, config: DemoModelConfig):
+        super().__init__()
+        self.config = config.validate()
+        self.unet = UNet2DConditionModel(**config.unet_kwargs())
+        self.image_encoder = CLIPVisionModelWithProjection(config.encoder_config())
+        self.cc_projection = nn.Linear(config.embedding_dim + ZERO123_POSE_DIM, config.embedding_dim)
+        self.scheduler = DDPMScheduler(num_train_timesteps=config.num_train_timesteps,
+                                       beta_start=config.beta_start, beta_end=config.beta_end,
+                                       beta_schedule=config.beta_schedule)
+
+    def downsample(self, images: torch.Tensor) -> torch.Tensor:
+        """Images (N, 3, H, W) in [-1, 1] -> (N, 3, r, r) at the model resolution (area-averaged: box filter)."""
+        if images.ndim != 4 or images.shape[1] != 3:
+            raise ValueError(f"images must be (N, 3, H, W), got {tuple(images.shape)}")
+        size = self.config.resolution
+        if images.shape[-2:] == (size, size):
+            return images
+        return F.interpolate(images, size=(size, size), mode="area")
+
+    def embed(self, images: torch.Tensor) -> torch.Tensor:
+        """Model-resolution images (N, 3, r, r) -> CLIP image embeddings (N, D)."""
+        return self.image_encoder(pixel_values=images).image_embeds
+
+    def add_noise(self, clean: torch.Tensor, noise: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        """``x_t = sqrt(abar_t) x_0 + sqrt(1 - abar_t) eps`` for (B, 3, r, r) tensors and steps t (B,)."""
+        return self.scheduler.add_noise(clean, noise, t)
+
+    def predict_noise(self, noisy: torch.Tensor, reference: torch.Tensor, embedding: torch.Tensor,
+                      pose: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        """Predicted noise (B, 3, r, r) from noisy targets, reference images (B, 3, r, r), reference
+        embeddings (B, D), relative poses (B, 3) and steps t (B,)."""
+        token = self.cc_projection(torch.cat([embedding, pose_features(pose).to(embedding.dtype)], -1))
+        return self.unet(torch.cat([noisy, reference], 1), t, encoder_hidden_states=token[:, None],
+                         class_labels=fourier_pose_features(pose).to(noisy.dtype)).sample
+
+    def save_pretrained(self, folder: Path) -> None:
+        """Write ``config.json`` and ``model.safetensors`` into ``folder``."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        self.config.save(folder / CONFIG_FILE)
+        save_file({k: v.detach().contiguous() for k, v in self.state_dict().items()}, str(folder / WEIGHTS_FILE))
+
+    @classmethod
+    def from_pretrained(cls, folder: Path) -> DemoDiffusionModel:
+        """Rebuild from a folder written by ``save_pretrained`` (safetensors only)."""
+        folder = Path(folder)
+        for name in (CONFIG_FILE, WEIGHTS_FILE):
+            if not (folder / name).is_file():
+                raise FileNotFoundError(f"demo model folder {folder} has no {name}")
+        model = cls(DemoModelConfig.load(folder / CONFIG_FILE))
+        model.load_state_dict(load_file(str(folder / WEIGHTS_FILE)))
+        return model

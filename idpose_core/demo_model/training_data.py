@@ -1,0 +1,148 @@
+"""Training and evaluation data of the demo model: pybullet renders of an object set, and view pairs.
+
+Views are rendered once per object from random cameras (``random_camera_spheres``, fixed radius,
+60 deg FOV) and cached as ``.npz``. A pair (reference, target) of the same object goes through the
+pipeline's own ``preprocess_views`` (one window for the pair, white background, 256 px) and the
+model's ``downsample``, exactly what the model sees at inference, with the window scale jittered.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from idpose_core.preprocessing import preprocess_views
+from idpose_core.spherical import relative
+from idpose_core.synthetic.scenes import ObjectSpec, SceneRenderer, random_camera_spheres
+
+
+@dataclass(frozen=True)
+class RenderedViews:
+    """Renders of O objects from V cameras each: ``rgb`` (O, V, S, S, 3) uint8 on white, ``mask``
+    (O, V, S, S) bool, ``cameras`` (O, V, 3) absolute (polar, azimuth, radius), ``names`` (O,)."""
+
+    rgb: np.ndarray
+    mask: np.ndarray
+    cameras: np.ndarray
+    names: tuple[str, ...]
+
+    @property
+    def num_objects(self) -> int:
+        return int(self.rgb.shape[0])
+
+    @property
+    def views_per_object(self) -> int:
+        return int(self.rgb.shape[1])
+
+
+def render_views(specs: Sequence[ObjectSpec], views_per_object: int, image_size: int, seed: int,
+                 polar_deg: tuple[float, float] = (30.0, 150.0)) -> RenderedViews:
+    """Render every object from its own ``views_per_object`` random cameras (seeded per object)."""
+    rng = np.random.default_rng(seed)
+    rgbs, masks, cameras = [], [], []
+    for spec in tqdm(specs, desc=f"render {views_per_object} views/object", unit="object"):
+        sph = random_camera_spheres(rng, views_per_object, polar_deg=polar_deg)
+        with SceneRenderer(spec, image_size) as renderer:
+            frames = [renderer.render(*camera) for camera in sph]
+        rgbs.append(np.stack([f[0] for f in frames]))
+        masks.append(np.stack([f[1] for f in frames]))
+        cameras.append(sph)
+    return RenderedViews(np.stack(rgbs), np.stack(masks), np.stack(cameras), tuple(s.name for s in specs))
+
+
+def cached_views(cache: Path, specs: Sequence[ObjectSpec], views_per_object: int, image_size: int,
+                 seed: int) -> RenderedViews:
+    """``render_views`` memoised in an ``.npz`` file keyed by the object names and arguments."""
+    cache = Path(cache)
+    if cache.is_file():
+        data = np.load(cache)
+        names = tuple(str(n) for n in data["names"])
+        if names == tuple(s.name for s in specs) and data["rgb"].shape[1:3] == (views_per_object, image_size):
+            return RenderedViews(data["rgb"], data["mask"], data["cameras"], names)
+    views = render_views(specs, views_per_object, image_size, seed)
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(cache, rgb=views.rgb, mask=views.mask, cameras=views.cameras, names=np.array(views.names))
+    return views
+
+
+@dataclass(frozen=True)
+class PairBatch:
+    """B view pairs: ``reference``/``target`` (B, 3, r, r) in [-1, 1], true relative ``pose`` (B, 3)
+    reference -> target, and the indices (object, reference view, target view) each (B,)."""
+
+    reference: torch.Tensor
+    target: torch.Tensor
+    pose: torch.Tensor
+    object_index: np.ndarray
+    reference_index: np.ndarray
+    target_index: np.ndarray
+
+
+def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: np.ndarray,
+               target_index: np.ndarray, downsample: Callable[[torch.Tensor], torch.Tensor],
+               window_scales: np.ndarray | float = 1.5) -> PairBatch:
+    """Preprocess each pair as a two-view set (``preprocess_views``) and downsample to model size."""
+    scales = np.broadcast_to(np.asarray(window_scales, dtype=np.float64), object_index.shape)
+    images = []
+    for o, a, b, scale in zip(object_index, reference_index, target_index, scales):
+        rgbs = [views.rgb[o, a], views.rgb[o, b]]
+        alphas = [views.mask[o, a].astype(np.uint8) * 255, views.mask[o, b].astype(np.uint8) * 255]
+        images.append(preprocess_views(rgbs, alphas, window_scale=float(scale)).images)
+    small = downsample(torch.cat(images))
+    small = small.reshape(len(images), 2, *small.shape[1:])
+    pose = relative(views.cameras[object_index, reference_index], views.cameras[object_index, target_index])
+    return PairBatch(small[:, 0], small[:, 1], torch.as_tensor(pose, dtype=torch.float32),
+                     object_index, reference_index, target_index)
+
+
+def random_pairs(views: RenderedViews, rng: np.random.Generator, count: int) -> tuple[np.ndarray, ...]:
+    """``count`` random (object, reference view, target view) index triples with distinct views."""
+    objects = rng.integers(0, views.num_objects, size=count)
+    reference = rng.integers(0, views.views_per_object, size=count)
+    offset = rng.integers(1, views.views_per_object, size=count)
+    return objects, reference, (reference + offset) % views.views_per_object
+
+
+class PairPool:
+    """A rolling pool of preprocessed training pairs: each draw adds ``refresh`` fresh pairs.
+
+    Preprocessing a pair costs about as much as a tenth of a training step here, so pairs are
+    reused a few times instead of being prepared anew for every batch.
+    """
+
+    def __init__(self, views: RenderedViews, downsample: Callable[[torch.Tensor], torch.Tensor],
+                 capacity: int, refresh: int, window_scale_range: tuple[float, float]):
+        self.views, self.downsample = views, downsample
+        self.capacity, self.refresh, self.window_scale_range = capacity, refresh, window_scale_range
+        self.reference: torch.Tensor | None = None
+        self.target: torch.Tensor | None = None
+        self.pose: torch.Tensor | None = None
+
+    def _fresh(self, rng: np.random.Generator, count: int) -> PairBatch:
+        scales = rng.uniform(*self.window_scale_range, size=count)
+        return make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales)
+
+    def fill(self, rng: np.random.Generator, count: int) -> None:
+        """Start the pool with ``count`` pairs."""
+        batch = self._fresh(rng, count)
+        self.reference, self.target, self.pose = batch.reference, batch.target, batch.pose
+
+    def draw(self, rng: np.random.Generator, batch: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Add ``refresh`` fresh pairs (replacing random ones once full), then sample ``batch`` pairs:
+        (reference, target, pose)."""
+        if self.pose is None:
+            raise RuntimeError("fill the pool before drawing from it")
+        fresh = self._fresh(rng, self.refresh)
+        if len(self.pose) < self.capacity:
+            self.reference = torch.cat([self.reference, fresh.reference])
+            self.target = torch.cat([self.target, fresh.target])
+            self.pose = torch.cat([self.pose, fresh.pose])
+        else:
+            slots = torch.as_tensor(rng.choice(len(self.pose), size=self.refresh, replace=False))
+            self.reference[slots], self.target[slots], self.pose[slots] = fresh.reference, fresh.target, fresh.pose
+        chosen = torch.as_tensor(rng.choice(len(self.pose), size=batch, replace=False))
+        return self.reference[chosen], self.target[chosen], self.pose[chosen]

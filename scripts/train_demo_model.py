@@ -1,0 +1,247 @@
+#!/usr/bin/env python3
+"""Train the embedded demo model on pybullet renders of the demo objects, on the CPU, resumably.
+
+Renders its own data (cached as .npz in --work-dir), trains the small view-conditioned diffusion
+model with an EMA of its weights, checkpoints every few minutes (rerun the same command to resume),
+shows a progress bar with the loss and the true-vs-wrong-pose loss gap, logs the gap and a grid-search
+inversion check (RotAcc on held-out views) to ``curve.csv`` and finally writes the EMA weights,
+``solver_defaults.json`` and ``training.json`` into --out.
+
+    python scripts/train_demo_model.py --minutes 100
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import torch
+from diffusers.training_utils import EMAModel
+from tqdm import tqdm
+
+from idpose_core.demo_model import EMBEDDED_MODEL_DIR, DemoDiffusionModel, DemoModelConfig, DemoPredictor
+from idpose_core.demo_model.grid_check import grid_search, pose_grid, random_pose_errors, rotation_errors
+from idpose_core.demo_model.training_data import (PairBatch, PairPool, RenderedViews, cached_views, make_pairs,
+                                                  random_pairs)
+from idpose_core.synthetic.scenes import demo_objects
+
+GAP_TIMESTEPS = (200, 350, 500, 650)
+CHECK_AZIMUTHS = 12
+CHECK_POLARS_DEG = (-45.0, 0.0, 45.0)
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=EMBEDDED_MODEL_DIR, help="where the final model goes")
+    parser.add_argument("--work-dir", type=Path, default=Path.home() / ".cache" / "idpose_demo_model",
+                        help="render cache, checkpoint and curve.csv (not in git)")
+    parser.add_argument("--minutes", type=float, default=100.0, help="training wall-time budget")
+    parser.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (0: budget only)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--lr", type=float, default=8e-4)
+    parser.add_argument("--ema-decay", type=float, default=0.998)
+    parser.add_argument("--t-min", type=int, default=100, help="smallest training timestep")
+    parser.add_argument("--t-max", type=int, default=800, help="largest training timestep")
+    parser.add_argument("--train-views", type=int, default=600, help="training cameras per object")
+    parser.add_argument("--heldout-views", type=int, default=60, help="held-out cameras per object")
+    parser.add_argument("--image-size", type=int, default=128, help="render size before preprocessing")
+    parser.add_argument("--window-jitter", type=float, default=0.2, help="window scale 1.5 +- this")
+    parser.add_argument("--gap-every", type=int, default=100, help="steps between loss-gap evaluations")
+    parser.add_argument("--check-every-minutes", type=float, default=20.0, help="minutes between inversion checks")
+    parser.add_argument("--check-pairs", type=int, default=8)
+    parser.add_argument("--gap-pairs", type=int, default=32)
+    parser.add_argument("--pool", type=int, default=4096, help="pairs kept in the rolling pair pool")
+    parser.add_argument("--pool-refresh", type=int, default=8, help="fresh pairs per step")
+    parser.add_argument("--checkpoint-every-minutes", type=float, default=3.0)
+    parser.add_argument("--block-out-channels", type=int, nargs="+", default=[32, 64, 128])
+    parser.add_argument("--layers-per-block", type=int, default=1)
+    return parser.parse_args()
+
+
+def load_data(args: argparse.Namespace) -> tuple[RenderedViews, RenderedViews]:
+    """Training and held-out renders of the demo objects (disjoint random cameras)."""
+    specs = demo_objects()
+    train = cached_views(args.work_dir / f"train_{args.seed}.npz", specs, args.train_views, args.image_size, args.seed)
+    heldout = cached_views(args.work_dir / f"heldout_{args.seed}.npz", specs, args.heldout_views, args.image_size,
+                           args.seed + 1000)
+    return train, heldout
+
+
+def fixed_pairs(views: RenderedViews, count: int, seed: int, model: DemoDiffusionModel) -> PairBatch:
+    """A fixed set of held-out pairs (window scale 1.5, as at inference)."""
+    return make_pairs(views, *random_pairs(views, np.random.default_rng(seed), count), model.downsample)
+
+
+@torch.no_grad()
+def loss_gaps(predictor: DemoPredictor, pairs: PairBatch, seed: int) -> dict[int, float]:
+    """Relative loss gap (wrong - true) / true at each of GAP_TIMESTEPS, same noise for both poses."""
+    rng = np.random.default_rng(seed)
+    count = len(pairs.pose)
+    wrong = pairs.pose.clone()
+    wrong[:, 1] = torch.remainder(wrong[:, 1] + torch.as_tensor(rng.uniform(math.pi / 3, 5 * math.pi / 3, count),
+                                                                dtype=torch.float32), 2 * math.pi)
+    views = predictor.encode(torch.cat([pairs.reference, pairs.target]))
+    ref, tgt = torch.arange(count), torch.arange(count) + count
+    noise = torch.randn((count, *views.noise_shape), generator=torch.Generator().manual_seed(seed))
+    gaps = {}
+    for t in GAP_TIMESTEPS:
+        steps = torch.full((count,), t, dtype=torch.long)
+        true_loss = predictor.noise_error(views, ref, tgt, pairs.pose, steps, noise).mean()
+        wrong_loss = predictor.noise_error(views, ref, tgt, wrong, steps, noise).mean()
+        gaps[t] = float((wrong_loss - true_loss) / true_loss)
+    return gaps
+
+
+def inversion_check(predictor: DemoPredictor, pairs: PairBatch, views: RenderedViews, t: int) -> dict[str, float]:
+    """Grid-search RotAcc@15/30 on held-out pairs (exploration only, one noise sample: cheap and coarse)."""
+    candidates = pose_grid(CHECK_AZIMUTHS, CHECK_POLARS_DEG)
+    predicted = grid_search(predictor, pairs.reference, pairs.target, candidates, t, noise_samples=1)
+    errors = rotation_errors(predicted, *true_cameras(pairs, views))
+    return {"acc15": float(np.mean(errors < 15)), "acc30": float(np.mean(errors < 30))}
+
+
+def true_cameras(pairs: PairBatch, views: RenderedViews) -> tuple[np.ndarray, np.ndarray]:
+    """Absolute cameras (P, 3) of the pairs' references and targets."""
+    return (views.cameras[pairs.object_index, pairs.reference_index],
+            views.cameras[pairs.object_index, pairs.target_index])
+
+
+def ema_predictor(model: DemoDiffusionModel, ema: EMAModel, config: DemoModelConfig) -> DemoPredictor:
+    """A frozen copy of the model carrying the EMA weights."""
+    copy = DemoDiffusionModel(config)
+    copy.load_state_dict(model.state_dict())
+    ema.copy_to(copy.parameters())
+    return DemoPredictor(copy)
+
+
+def main() -> None:
+    args = parse_args()
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(args.seed)
+    args.work_dir.mkdir(parents=True, exist_ok=True)
+    config = DemoModelConfig(block_out_channels=tuple(args.block_out_channels), layers_per_block=args.layers_per_block)
+    model = DemoDiffusionModel(config)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
+    ema = EMAModel(model.parameters(), decay=args.ema_decay)
+    checkpoint_path = args.work_dir / "checkpoint.pt"
+    step, elapsed = 0, 0.0
+    if checkpoint_path.is_file():
+        state = torch.load(checkpoint_path, weights_only=True)
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        ema.load_state_dict(state["ema"])
+        step, elapsed = int(state["step"]), float(state["elapsed"])
+        print(f"resumed from {checkpoint_path} at step {step} ({elapsed / 60:.1f} min)")
+
+    train, heldout = load_data(args)
+    gap_pairs = fixed_pairs(heldout, args.gap_pairs, args.seed + 1, model)
+    check_pairs = fixed_pairs(heldout, args.check_pairs, args.seed + 2, model)
+    baseline = random_pose_errors(*true_cameras(check_pairs, heldout), np.random.default_rng(args.seed),
+                                  CHECK_POLARS_DEG)
+    print(f"random-pose baseline on the check pairs: RotAcc@15 {np.mean(baseline < 15):.0%}, "
+          f"@30 {np.mean(baseline < 30):.0%}")
+    curve_path = args.work_dir / "curve.csv"
+    new_curve = not curve_path.is_file()
+    curve = curve_path.open("a", newline="")
+    writer = csv.writer(curve)
+    if new_curve:
+        writer.writerow(["step", "minutes", "loss"] + [f"gap_t{t}" for t in GAP_TIMESTEPS]
+                        + ["check_t", "acc15", "acc30"])
+
+    budget = args.minutes * 60.0
+    started = time.monotonic() - elapsed
+    last_checkpoint = last_check = time.monotonic()
+    gaps: dict[int, float] = {}
+    losses: list[float] = []
+    jitter = (1.5 - args.window_jitter, 1.5 + args.window_jitter)
+    pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter)
+    pool.fill(np.random.default_rng([args.seed, step, 1]), min(512, args.pool))
+    bar = tqdm(total=int(budget), initial=int(elapsed), unit="s", desc="train demo model")
+    model.train()
+    while True:
+        elapsed = time.monotonic() - started
+        if elapsed >= budget or (args.max_steps and step >= args.max_steps):
+            break
+        rng = np.random.default_rng([args.seed, step])
+        reference, target, pose = pool.draw(rng, args.batch)
+        t = torch.as_tensor(rng.integers(args.t_min, args.t_max + 1, size=args.batch))
+        noise = torch.randn_like(target)
+        predicted = model.predict_noise(model.add_noise(target, noise, t), reference, model.embed(reference), pose, t)
+        loss = (predicted - noise).pow(2).mean()
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        optimizer.param_groups[0]["lr"] = args.lr * min(1.0, (step + 1) / 200)
+        optimizer.step()
+        ema.step(model.parameters())
+        step += 1
+        losses.append(loss.item())
+
+        row_check = ["", "", ""]
+        now = time.monotonic()
+        if step % args.gap_every == 0 or now - last_check >= args.check_every_minutes * 60.0:
+            predictor = ema_predictor(model, ema, config)
+            gaps = loss_gaps(predictor, gap_pairs, args.seed + 3)
+            if now - last_check >= args.check_every_minutes * 60.0:
+                best_t = max(gaps, key=gaps.get)
+                result = inversion_check(predictor, check_pairs, heldout, best_t)
+                row_check = [best_t, result["acc15"], result["acc30"]]
+                tqdm.write(f"step {step}: inversion check at t={best_t}: RotAcc@15 {result['acc15']:.0%}, "
+                           f"@30 {result['acc30']:.0%}")
+                last_check = time.monotonic()
+            writer.writerow([step, round((time.monotonic() - started) / 60, 2), round(float(np.mean(losses)), 5)]
+                            + [round(gaps[t], 4) for t in GAP_TIMESTEPS] + row_check)
+            curve.flush()
+            losses = []
+            model.train()
+        best = max(gaps.items(), key=lambda item: item[1]) if gaps else (0, 0.0)
+        bar.set_postfix(step=step, loss=f"{losses[-1] if losses else 0:.4f}", gap=f"{best[1]:+.1%}@t{best[0]}")
+        bar.update(int(time.monotonic() - started) - bar.n)
+        if time.monotonic() - last_checkpoint >= args.checkpoint_every_minutes * 60.0:
+            save_checkpoint(checkpoint_path, model, optimizer, ema, step, time.monotonic() - started)
+            last_checkpoint = time.monotonic()
+    bar.close()
+    elapsed = time.monotonic() - started
+    save_checkpoint(checkpoint_path, model, optimizer, ema, step, elapsed)
+    predictor = ema_predictor(model, ema, config)
+    gaps = loss_gaps(predictor, gap_pairs, args.seed + 3)
+    best_t = max(gaps, key=gaps.get)
+    final = inversion_check(predictor, check_pairs, heldout, best_t)
+    print(f"final: step {step}, {elapsed / 60:.1f} min, gaps {gaps}, check at t={best_t}: {final}")
+    predictor.model.save_pretrained(args.out)
+    (args.out / "solver_defaults.json").write_text(json.dumps(
+        {"probe_t": best_t / config.num_train_timesteps,
+         "refine_t_range": [best_t / config.num_train_timesteps, (best_t + 10) / config.num_train_timesteps]},
+        indent=2) + "\n")
+    (args.out / "training.json").write_text(json.dumps({
+        "script": "scripts/train_demo_model.py",
+        "arguments": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+        "config": asdict(config),
+        "data": {"objects": list(train.names), "train_views_per_object": train.views_per_object,
+                 "heldout_views_per_object": heldout.views_per_object, "image_size": args.image_size,
+                 "polar_deg": [30, 150], "fov_deg": 60},
+        "steps": step, "batch": args.batch, "wall_minutes": round(elapsed / 60, 1),
+        "threads": args.threads, "loss_gap_by_t": gaps, "final_check": {"t": best_t, **final,
+        "pairs": len(check_pairs.pose), "grid": f"{CHECK_AZIMUTHS} azimuths x polar offsets {CHECK_POLARS_DEG}"},
+    }, indent=2) + "\n")
+    print(f"wrote {args.out}")
+
+
+def save_checkpoint(path: Path, model: DemoDiffusionModel, optimizer: torch.optim.Optimizer, ema: EMAModel,
+                    step: int, elapsed: float) -> None:
+    """Atomically write everything needed to resume."""
+    temporary = path.with_suffix(".tmp")
+    torch.save({"model": model.state_dict(), "optimizer": optimizer.state_dict(), "ema": ema.state_dict(),
+                "step": step, "elapsed": elapsed}, temporary)
+    temporary.replace(path)
+
+
+if __name__ == "__main__":
+    main()
