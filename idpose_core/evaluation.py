@@ -10,6 +10,7 @@ OpenGL camera axes, as ``idpose_core.metrics`` expects. Relative radii are in Ze
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,6 +27,20 @@ from idpose_core.spherical import relative
 
 PICK_SIZE = 8
 VIEW_COUNTS = (2, 4, 6, 8)
+
+
+@dataclass(frozen=True)
+class ViewSetEstimate:
+    """What an estimator returns for n views: what the node publishes, and the solver's confidence.
+
+    ``poses`` (n, 4, 4) optical camera poses in the anchor camera's frame (poses[0] = identity);
+    ``scores`` and ``ambiguous`` (n-1,) per non-anchor view; ``seconds`` the wall time of the estimate.
+    """
+
+    poses: np.ndarray
+    scores: np.ndarray
+    ambiguous: np.ndarray
+    seconds: float
 
 
 def draw_picks(pool: Sequence[int], samples: int, seed: int, pick_size: int = PICK_SIZE) -> list[list[int]]:
