@@ -25,6 +25,8 @@ setup(
     entry_points={
         "console_scripts": [
             "estimator = idpose_ros.estimator_node:main",
+            "evaluate_bag = idpose_ros.evaluate_bag:main",
+            "make_synthetic_bag = idpose_ros.make_synthetic_bag:main",
         ],
     },
 )
