@@ -43,6 +43,7 @@ from idpose_ros.bag_io import BagError
 from idpose_ros.bag_report import write_report
 from idpose_ros.bag_views import BagViews, decode_view, load_view_messages, read_bag_views
 from idpose_ros.parameters import SOLVER_PARAMETERS, parameter_table, solver_config
+from idpose_ros.replay import ReplayError, ReplayEstimator
 
 ImageMessage = Image | CompressedImage
 Progress = Callable[[str, int, int], None]
@@ -120,15 +121,21 @@ def usable_view_counts(requested: Sequence[int], pool_size: int) -> list[int]:
     return counts
 
 
-def run_evaluation(bag_path: Path, image_topic: str, bag: BagViews, estimator: ViewSetEstimator, samples: int,
-                   seed: int, view_counts: Sequence[int], center: Sequence[float], up: Sequence[float],
-                   show_progress: bool = True) -> EvaluationRun:
-    """Draw the picks, estimate the first n views of each, and score every (anchor, view) pair."""
+def plan_evaluation(bag: BagViews, image_topic: str, samples: int, seed: int, view_counts: Sequence[int]
+                    ) -> EvaluationRun:
+    """The seeded picks and the view counts to evaluate; BagError when too few views are usable."""
     if len(bag.pool) < 2:
-        raise BagError(f"fewer than 2 usable views ({len(bag.pool)} of {len(bag.views)} on {image_topic}); "
-                       f"skipped: {'; '.join(f'view {k}: {r}' for k, r in list(bag.skipped.items())[:5])}")
-    picks = draw_picks(bag.pool, samples, seed)
-    run = EvaluationRun(picks=picks, view_counts=usable_view_counts(view_counts, len(bag.pool)))
+        reasons = "; ".join(f"view {k}: {r}" for k, r in list(bag.skipped.items())[:3])
+        raise BagError(f"fewer than 2 usable views ({len(bag.pool)} of {len(bag.views)} on {image_topic})"
+                       + (f"; skipped {reasons}" if reasons else ""))
+    return EvaluationRun(picks=draw_picks(bag.pool, samples, seed),
+                         view_counts=usable_view_counts(view_counts, len(bag.pool)))
+
+
+def run_evaluation(bag_path: Path, image_topic: str, bag: BagViews, run: EvaluationRun, estimator: ViewSetEstimator,
+                   center: Sequence[float], up: Sequence[float], show_progress: bool = True) -> EvaluationRun:
+    """Estimate the first n views of each pick of ``run`` and score every (anchor, view) pair into it."""
+    picks = run.picks
     messages = load_view_messages(bag_path, image_topic, {v for pick in picks for v in pick})
     low, high = ANCHOR_POLAR_RANGE_DEG
     with tqdm(total=len(picks) * len(run.view_counts), desc="estimating", unit="set", file=sys.stderr,
@@ -141,7 +148,9 @@ def run_evaluation(bag_path: Path, image_topic: str, bag: BagViews, estimator: V
             run.true_cameras[sample] = true_c2w
             for n in run.view_counts:
                 def progress(stage: str, done: int, total: int, label: str = f"sample {sample}, {n} views") -> None:
-                    bar.set_postfix_str(f"{label}: {stage} {100.0 * done / max(total, 1):.0f} %", refresh=False)
+                    text = f"{label}: {stage} {100 * done // max(total, 1)} %"
+                    if text != bar.postfix:
+                        bar.set_postfix_str(text)
 
                 bar.set_postfix_str(f"sample {sample}, {n} views")
                 estimate = estimator([messages[v] for v in pick[:n]], anchor_polar_deg, distance, progress)
@@ -199,7 +208,6 @@ def make_estimator(args: argparse.Namespace, values: dict[str, Any]) -> ViewSetE
     """The offline estimator (model loaded here) or the replay client (model loaded by the node)."""
     if args.mode == "offline":
         return OfflineEstimator(load_predictor(args.model_path, args.device, args.precision), values)
-    from idpose_ros.replay import ReplayEstimator
     return ReplayEstimator(values, model_path=args.model_path, device=args.device, precision=args.precision,
                            node_name=args.node, timeout=args.timeout)
 
@@ -213,13 +221,13 @@ def main(argv: list[str] | None = None) -> int:
         if bag.skipped:
             print(f"evaluate_bag: {len(bag.skipped)} of {len(bag.views)} views skipped (reasons in report.json), "
                   f"e.g. view {next(iter(bag.skipped))}: {next(iter(bag.skipped.values()))}", file=sys.stderr)
+        run = plan_evaluation(bag, args.image_topic, args.samples, args.seed, args.n)
         estimator = make_estimator(args, values)
         try:
-            run = run_evaluation(args.bag, args.image_topic, bag, estimator, args.samples, args.seed, args.n,
-                                 args.object_center, args.up)
+            run_evaluation(args.bag, args.image_topic, bag, run, estimator, args.object_center, args.up)
         finally:
             getattr(estimator, "close", lambda: None)()
-    except (BagError, ModelLoadError, ValueError) as err:
+    except (BagError, ModelLoadError, ReplayError, ValueError) as err:
         print(f"evaluate_bag: error: {err}", file=sys.stderr)
         return 2
     table = write_report(args.out, args, values, bag, run, time.perf_counter() - started)

@@ -18,8 +18,8 @@ from idpose_core.synthetic.render_oracle import RenderOracle
 from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, random_camera_spheres
 from idpose_ros.bag_report import write_report
 from idpose_ros.bag_views import read_bag_views
-from idpose_ros.evaluate_bag import OfflineEstimator, parse_args, run_evaluation, solver_values
-from idpose_ros.make_synthetic_bag import IMAGE_TOPIC, make_bag
+from idpose_ros.evaluate_bag import OfflineEstimator, parse_args, plan_evaluation, run_evaluation, solver_values
+from idpose_ros.make_synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, make_bag
 
 SEED, VIEWS, SIZE = 5, 8, 64
 ORACLE_SOLVER = ["adjust_lr=1.0", "refine_lr=0.1", "refine_steps_per_view=30"]
@@ -74,8 +74,8 @@ def oracle_run(demo_bag, oracle):
     torch.set_num_threads(2)
     bag = read_bag_views(demo_bag, IMAGE_TOPIC)
     estimator = OfflineEstimator(oracle, solver_values("fast", None, ORACLE_SOLVER))
-    run = run_evaluation(demo_bag, IMAGE_TOPIC, bag, estimator, samples=1, seed=0, view_counts=(2, 4, 8),
-                         center=(0, 0, 0), up=(0, 0, 1), show_progress=False)
+    run = plan_evaluation(bag, IMAGE_TOPIC, samples=1, seed=0, view_counts=(2, 4, 8))
+    run_evaluation(demo_bag, IMAGE_TOPIC, bag, run, estimator, center=(0, 0, 0), up=(0, 0, 1), show_progress=False)
     return bag, run
 
 
@@ -91,6 +91,24 @@ def test_the_oracle_scores_100_percent_on_every_view_count(oracle_run, oracle):
         assert summary["mean_rot_err_deg"] < 2.0 and summary["mean_pos_err"] < 0.05
     for record in run.records:
         np.testing.assert_allclose(record["pred_rel_sph"][:2], record["true_rel_sph"][:2], atol=np.radians(3))
+
+
+def test_tf_and_pose_topic_ground_truth_give_the_same_numbers(demo_bag, oracle):
+    """Same picks, same estimates: the two ground-truth sources score identically (one 2-view set each)."""
+    estimator = OfflineEstimator(oracle, solver_values("fast", None, ORACLE_SOLVER))
+    records = []
+    for gt_topic in (None, POSE_TOPIC):
+        bag = read_bag_views(demo_bag, IMAGE_TOPIC, gt_topic=gt_topic)
+        run = plan_evaluation(bag, IMAGE_TOPIC, samples=1, seed=3, view_counts=(2,))
+        run_evaluation(demo_bag, IMAGE_TOPIC, bag, run, estimator, center=(0, 0, 0), up=(0, 0, 1),
+                       show_progress=False)
+        records.append(run.records)
+    from_tf, from_topic = records
+    assert [(r["anchor_view"], r["view"]) for r in from_tf] == [(r["anchor_view"], r["view"]) for r in from_topic]
+    for a, b in zip(from_tf, from_topic):
+        np.testing.assert_allclose(a["true_rel_sph"], b["true_rel_sph"], atol=1e-12)
+        assert a["rot_err_deg"] == pytest.approx(b["rot_err_deg"], abs=1e-9)
+        assert a["pos_err"] == pytest.approx(b["pos_err"], abs=1e-12)
 
 
 def test_report_files(tmp_path, demo_bag, oracle_run):

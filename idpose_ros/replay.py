@@ -1,0 +1,209 @@
+"""Replays a view set to the estimator node over ROS, as a robot would, and collects what it publishes.
+
+Per view set: set the node's parameters (solver settings, anchor polar angle, object distance,
+``capture_mode`` on_request), ``~/reset``, then for each image publish it on the node's ``image``
+(or ``image/compressed``) topic and call ``~/capture``; then ``~/estimate``, and read the poses
+from ``~/poses`` and the per-view scores and ambiguity flags from ``/diagnostics``. The node runs in
+this process (started here, model loaded by the node) or is a running node named by ``node_name``.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.logging import LoggingSeverity
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CompressedImage, Image
+from std_srvs.srv import Trigger
+
+from idpose_core.evaluation import PICK_SIZE, ViewSetEstimate
+from idpose_ros.diagnostics import STATUS_NAME
+from idpose_ros.estimator_node import RESULT_QOS, EstimatorNode
+from msg_adapters import pose_to_matrix
+
+SERVICE_TIMEOUT = 10.0  # s to wait for a service, a subscriber or a parameter change
+CAPTURE_RETRY = 0.05  # s between two ~/capture attempts while the image is on its way
+REPUBLISH_AFTER = 1.0  # s without the node receiving an image before it is published again
+IN_PROCESS_DIAGNOSTICS_PERIOD = 0.2  # s, for a node started here
+
+
+class ReplayError(RuntimeError):
+    """The estimator node refused, failed or did not answer; the message says which and why."""
+
+
+def _wait(condition: Callable[[], bool], timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise ReplayError(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(0.01)
+
+
+def _stamp_ns(stamp) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+class ReplayEstimator:
+    """A ``ViewSetEstimator`` that goes through the estimator node; call ``close()`` when done."""
+
+    def __init__(self, solver_values: dict[str, Any], model_path: str = "", device: str = "auto",
+                 precision: str = "auto", node_name: str | None = None, timeout: float = 3600.0):
+        self.solver_values, self.timeout = solver_values, timeout
+        self._context = rclpy.Context()
+        rclpy.init(context=self._context)
+        self._executor = MultiThreadedExecutor(num_threads=4, context=self._context)
+        self._estimator: EstimatorNode | None = None
+        if node_name is None:
+            namespace = f"/idpose_evaluate_bag_{os.getpid()}"
+            self._estimator = EstimatorNode(context=self._context, namespace=namespace, parameter_overrides=[
+                Parameter("model_path", value=model_path), Parameter("device", value=device),
+                Parameter("precision", value=precision),
+                Parameter("diagnostics_period", value=IN_PROCESS_DIAGNOSTICS_PERIOD)])
+            self._estimator.get_logger().set_level(LoggingSeverity.WARN)  # keep the terminal to the progress bar
+            self._executor.add_node(self._estimator)
+            node_name = self._estimator.get_fully_qualified_name()
+        self.node_name = node_name.rstrip("/")
+        namespace = self.node_name.rsplit("/", 1)[0]
+        self._client = rclpy.create_node("idpose_evaluate_bag", context=self._context, namespace=namespace or "/")
+        self._executor.add_node(self._client)
+        self._lock = threading.Lock()
+        self._poses: PoseArray | None = None
+        self._status: dict[str, str] | None = None
+        self._status_serial = 0
+        self._publishers = {
+            Image: self._client.create_publisher(Image, f"{namespace}/image", qos_profile_sensor_data),
+            CompressedImage: self._client.create_publisher(CompressedImage, f"{namespace}/image/compressed",
+                                                           qos_profile_sensor_data),
+        }
+        self._services = {name: self._client.create_client(Trigger, f"{self.node_name}/{name}")
+                          for name in ("capture", "estimate", "reset")}
+        self._parameters = AsyncParameterClient(self._client, self.node_name)
+        self._client.create_subscription(PoseArray, f"{self.node_name}/poses", self._on_poses, RESULT_QOS)
+        self._client.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self._spinner = threading.Thread(target=self._executor.spin, daemon=True)
+        self._spinner.start()
+        try:
+            for name, client in self._services.items():
+                if not client.wait_for_service(timeout_sec=SERVICE_TIMEOUT):
+                    raise ReplayError(f"no estimator node answers {self.node_name}/{name}")
+            self._wait_until_idle(self.timeout, None)
+        except BaseException:
+            self.close()
+            raise
+
+    # ----- subscriptions ---------------------------------------------------------------------------------------
+    def _on_poses(self, msg: PoseArray) -> None:
+        with self._lock:
+            self._poses = msg
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name == STATUS_NAME and status.hardware_id.startswith(f"{self.node_name} ("):
+                with self._lock:
+                    self._status = {item.key: item.value for item in status.values}
+                    self._status_serial += 1
+
+    def _latest_status(self) -> tuple[int, dict[str, str] | None]:
+        with self._lock:
+            return self._status_serial, self._status
+
+    def _wait_until_idle(self, timeout: float, progress: Callable[[str, int, int], None] | None,
+                         after: int = 0) -> dict[str, str]:
+        """The first /diagnostics status after serial ``after`` whose state is idle; ReplayError on failure."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            serial, status = self._latest_status()
+            if status is not None and serial > after:
+                if status["state"] == "idle":
+                    return status
+                if status["state"] == "failed":
+                    raise ReplayError(f"the estimator node failed: {status['last_error'] or status['model']}")
+                if progress is not None and status["state"] == "estimating":
+                    progress(status["stage"], round(float(status["progress_percent"])), 100)
+            time.sleep(0.02)
+        raise ReplayError(f"the estimator node {self.node_name} did not become idle within {timeout:g} s")
+
+    # ----- services and parameters ---------------------------------------------------------------------------------
+    def _call(self, name: str) -> Trigger.Response:
+        future = self._services[name].call_async(Trigger.Request())
+        _wait(future.done, SERVICE_TIMEOUT, f"{self.node_name}/{name}")
+        return future.result()
+
+    def _set_parameters(self, values: dict[str, Any]) -> None:
+        future = self._parameters.set_parameters_atomically([Parameter(k, value=v) for k, v in values.items()])
+        _wait(future.done, SERVICE_TIMEOUT, f"the parameters of {self.node_name}")
+        result = future.result().result
+        if not result.successful:
+            raise ReplayError(f"the estimator node refused the parameters: {result.reason}")
+
+    def _capture(self, message: Image | CompressedImage) -> None:
+        """Publish one image and keep it with ~/capture, publishing again if it got lost on the way."""
+        publisher = self._publishers[type(message)]
+        _wait(lambda: publisher.get_subscription_count() > 0, SERVICE_TIMEOUT,
+              f"the estimator to subscribe to {publisher.topic_name}")
+        deadline = time.monotonic() + SERVICE_TIMEOUT
+        while time.monotonic() < deadline:
+            publisher.publish(message)
+            republish_at = time.monotonic() + REPUBLISH_AFTER
+            while time.monotonic() < republish_at:
+                response = self._call("capture")
+                if response.success:
+                    return
+                if "no new image" not in response.message:
+                    raise ReplayError(f"{self.node_name}/capture refused: {response.message}")
+                time.sleep(CAPTURE_RETRY)
+        raise ReplayError(f"the estimator node did not receive the image on {publisher.topic_name}")
+
+    # ----- one view set ---------------------------------------------------------------------------------------------
+    def __call__(self, messages: Sequence[Image | CompressedImage], anchor_polar_deg: float, object_distance: float,
+                 progress: Callable[[str, int, int], None] | None = None) -> ViewSetEstimate:
+        self._set_parameters({**self.solver_values, "anchor_polar_deg": float(anchor_polar_deg),
+                              "object_distance": float(object_distance), "capture_mode": "on_request",
+                              "views_per_estimate": 0, "max_views": PICK_SIZE, "anchor_frame": ""})
+        self._call("reset")
+        for message in messages:
+            self._capture(message)
+        with self._lock:
+            self._poses = None
+            after = self._status_serial
+        response = self._call("estimate")
+        if not response.success:
+            raise ReplayError(f"{self.node_name}/estimate refused: {response.message}")
+        status = self._wait_until_idle(self.timeout, progress, after)
+        anchor_stamp = _stamp_ns(messages[0].header.stamp)
+
+        def published() -> bool:
+            with self._lock:
+                return (self._poses is not None and len(self._poses.poses) == len(messages)
+                        and _stamp_ns(self._poses.header.stamp) == anchor_stamp)
+
+        _wait(published, SERVICE_TIMEOUT, f"{len(messages)} poses on {self.node_name}/poses")
+        with self._lock:
+            poses = np.stack([pose_to_matrix(pose) for pose in self._poses.poses])
+        views = range(1, len(messages))
+        return ViewSetEstimate(
+            poses=poses,
+            scores=np.array([float(status[f"view_{k}_score"]) for k in views]),
+            ambiguous=np.array([status[f"view_{k}_ambiguous"] == "true" for k in views]),
+            seconds=float(status["last_run_seconds"]),
+        )
+
+    def close(self) -> None:
+        """Stop the node started here (if any), the executor and this ROS context."""
+        if self._estimator is not None:
+            self._estimator.stop()
+        self._executor.shutdown(timeout_sec=1.0)
+        for node in (self._estimator, getattr(self, "_client", None)):
+            if node is not None:
+                node.destroy_node()
+        rclpy.try_shutdown(context=self._context)
