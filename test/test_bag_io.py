@@ -4,6 +4,7 @@ Bags are written here with rosbags through make_synthetic_bag (tiny: 3 views of 
 for the transform-chain cases. No ROS graph is needed: rclpy only (de)serializes messages.
 """
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -198,3 +199,16 @@ def test_a_bag_without_transforms_asks_for_a_gt_topic(tmp_path):
         write_rgba_image(bag, "/img", SECOND, "cam", np.zeros((4, 4, 3), np.uint8), np.ones((4, 4), bool))
     with pytest.raises(BagError, match="no transforms on /tf or /tf_static; give the ground truth with --gt-topic"):
         read_bag_views(path, "/img")
+
+
+def test_the_shipped_demo_bag():
+    """data/demo_bag: 12 views of the duck from make_synthetic_bag (mcap, seed 0, 256 px), small enough to ship."""
+    path = Path(__file__).resolve().parents[1] / "data" / "demo_bag"
+    assert sum(f.stat().st_size for f in path.iterdir()) < 5 * 1024 * 1024
+    bag = read_bag_views(path, IMAGE_TOPIC)
+    assert bag.pool == list(range(12)) and bag.skipped == {}
+    expected = expected_optical_poses(0, 12)
+    for view_id in bag.pool:
+        np.testing.assert_allclose(bag.world_from_camera[view_id], expected[view_id], atol=1e-9)
+    rgb, alpha = decode_view(load_view_messages(path, IMAGE_TOPIC, {0})[0])
+    assert rgb.shape == (256, 256, 3) and alpha.max() == 255
