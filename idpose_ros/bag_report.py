@@ -27,6 +27,13 @@ def ground_truth_source(args: argparse.Namespace) -> str:
             else f"/tf + /tf_static ({args.world_frame} -> image frame, at the image stamp)")
 
 
+def model_name(model: dict[str, Any]) -> str:
+    """``model_path`` as the user gave it (empty: the embedded default), or the predictor's class."""
+    if "model_path" in model:
+        return f"`{model['model_path']}`" if model["model_path"] else "the embedded default"
+    return model.get("predictor", "unknown")
+
+
 def markdown_table(aggregates: dict[str, dict[str, float | int]], method: str) -> str:
     """Rows: the method with each view count, then all pairs; accuracies in percent, as in the paper's Table 1."""
     header = "| method | views | " + " | ".join(title for _, title, _ in COLUMNS) + " |"
@@ -59,8 +66,8 @@ def plot_cameras(path: Path, true_c2w: np.ndarray, pred_c2w: np.ndarray, views: 
     plt.close(figure)
 
 
-def write_report(out: Path, args: argparse.Namespace, solver_values: dict[str, Any], bag: BagViews,
-                 run: EvaluationRun, seconds: float) -> str:
+def write_report(out: Path, args: argparse.Namespace, solver_values: dict[str, Any], model: dict[str, Any],
+                 bag: BagViews, run: EvaluationRun, seconds: float) -> str:
     """Write report.json, report.md and cameras_<sample>.png into ``out``; returns the markdown table."""
     out.mkdir(parents=True, exist_ok=True)
     aggregates = run.aggregates
@@ -69,8 +76,7 @@ def write_report(out: Path, args: argparse.Namespace, solver_values: dict[str, A
     views_by_id = {view.view_id: view for view in bag.views}
     report = {
         "bag": str(args.bag), "image_topic": args.image_topic, "ground_truth": ground_truth_source(args),
-        "mode": args.mode, "model": {"path": args.model_path or "(embedded default)", "device": args.device,
-                                     "precision": args.precision},
+        "mode": args.mode, "model": model,
         "solver": {"preset": args.preset, **solver_values},
         "protocol": {"samples": args.samples, "seed": args.seed, "pick_size": len(run.picks[0]),
                      "view_counts": run.view_counts, "object_center": list(args.object_center), "up": list(args.up),
@@ -86,7 +92,7 @@ def write_report(out: Path, args: argparse.Namespace, solver_values: dict[str, A
                       for item in report["views"]["skipped"])
     (out / "report.md").write_text(
         f"# Pose evaluation of `{args.bag}`\n\n"
-        f"{method}, mode {args.mode}, model {report['model']['path']}, solver preset {args.preset}. "
+        f"{method}, mode {args.mode}, model {model_name(model)}, solver preset {args.preset}. "
         f"{args.samples} picks of {report['protocol']['pick_size']} views (seed {args.seed}), "
         f"evaluated on their first {', '.join(map(str, run.view_counts))} views; the first view is the anchor.\n"
         f"Ground truth: {report['ground_truth']}. Views on {args.image_topic}: {len(bag.views)}, "

@@ -54,6 +54,8 @@ ANCHOR_POLAR_RANGE_DEG = next(spec["bounds"] for name, _, spec in parameter_tabl
 class ViewSetEstimator(Protocol):
     """Estimates the poses of n views (the first is the anchor) given the anchor's polar angle and distance."""
 
+    model: dict[str, str]  # what estimates: model path, device, precision (and the node, in replay)
+
     def __call__(self, messages: Sequence[ImageMessage], anchor_polar_deg: float, object_distance: float,
                  progress: Progress | None = None) -> ViewSetEstimate: ...
 
@@ -81,8 +83,9 @@ def solver_values(preset: str, variant: str | None, overrides: Sequence[str]) ->
 class OfflineEstimator:
     """Runs the node's pipeline in this process on the same parameters the node would get."""
 
-    def __init__(self, predictor: NoisePredictor, values: dict[str, Any]):
+    def __init__(self, predictor: NoisePredictor, values: dict[str, Any], model: dict[str, str] | None = None):
         self.predictor, self.values = predictor, values
+        self.model = model or {"predictor": type(predictor).__name__}
 
     def __call__(self, messages: Sequence[ImageMessage], anchor_polar_deg: float, object_distance: float,
                  progress: Progress | None = None) -> ViewSetEstimate:
@@ -207,7 +210,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def make_estimator(args: argparse.Namespace, values: dict[str, Any]) -> ViewSetEstimator:
     """The offline estimator (model loaded here) or the replay client (model loaded by the node)."""
     if args.mode == "offline":
-        return OfflineEstimator(load_predictor(args.model_path, args.device, args.precision), values)
+        return OfflineEstimator(load_predictor(args.model_path, args.device, args.precision), values,
+                                {"model_path": args.model_path, "device": args.device, "precision": args.precision})
     return ReplayEstimator(values, model_path=args.model_path, device=args.device, precision=args.precision,
                            node_name=args.node, timeout=args.timeout)
 
@@ -230,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     except (BagError, ModelLoadError, ReplayError, ValueError) as err:
         print(f"evaluate_bag: error: {err}", file=sys.stderr)
         return 2
-    table = write_report(args.out, args, values, bag, run, time.perf_counter() - started)
+    table = write_report(args.out, args, values, estimator.model, bag, run, time.perf_counter() - started)
     print(table)
     print(f"report: {args.out / 'report.md'}, {args.out / 'report.json'}")
     return 0

@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.logging import LoggingSeverity
-from rclpy.parameter import Parameter
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CompressedImage, Image
@@ -97,6 +97,7 @@ class ReplayEstimator:
                 if not client.wait_for_service(timeout_sec=SERVICE_TIMEOUT):
                     raise ReplayError(f"no estimator node answers {self.node_name}/{name}")
             self._wait_until_idle(self.timeout, None)
+            self.model = {"node": self.node_name, **self._get_parameters(("model_path", "device", "precision"))}
         except BaseException:
             self.close()
             raise
@@ -139,6 +140,11 @@ class ReplayEstimator:
         _wait(future.done, SERVICE_TIMEOUT, f"{self.node_name}/{name}")
         return future.result()
 
+    def _get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
+        future = self._parameters.get_parameters(list(names))
+        _wait(future.done, SERVICE_TIMEOUT, f"the parameters of {self.node_name}")
+        return {name: parameter_value_to_python(value) for name, value in zip(names, future.result().values)}
+
     def _set_parameters(self, values: dict[str, Any]) -> None:
         future = self._parameters.set_parameters_atomically([Parameter(k, value=v) for k, v in values.items()])
         _wait(future.done, SERVICE_TIMEOUT, f"the parameters of {self.node_name}")
@@ -159,10 +165,9 @@ class ReplayEstimator:
                 response = self._call("capture")
                 if response.success:
                     return
-                if "no new image" not in response.message:
-                    raise ReplayError(f"{self.node_name}/capture refused: {response.message}")
                 time.sleep(CAPTURE_RETRY)
-        raise ReplayError(f"the estimator node did not receive the image on {publisher.topic_name}")
+        raise ReplayError(f"{self.node_name}/capture kept refusing the image published on {publisher.topic_name}: "
+                          f"{response.message}")
 
     # ----- one view set ---------------------------------------------------------------------------------------------
     def __call__(self, messages: Sequence[Image | CompressedImage], anchor_polar_deg: float, object_distance: float,

@@ -116,7 +116,8 @@ def test_report_files(tmp_path, demo_bag, oracle_run):
     bag, run = oracle_run
     args = parse_args([str(demo_bag), "--out", str(tmp_path / "out"), "--samples", "1", "--n", "2", "4", "8",
                        "--preset", "fast"] + [x for item in ORACLE_SOLVER for x in ("--solver-param", item)])
-    table = write_report(args.out, args, solver_values("fast", None, ORACLE_SOLVER), bag, run, seconds=1.5)
+    table = write_report(args.out, args, solver_values("fast", None, ORACLE_SOLVER), {"predictor": "oracle"}, bag,
+                         run, seconds=1.5)
     report = json.loads((args.out / "report.json").read_text())
     assert report["aggregates"]["all"]["rot_acc_15"] == 1.0 and len(report["pairs"]) == 11
     assert report["solver"]["refine_steps_per_view"] == 30 and report["solver"]["variant"] == "full"
@@ -159,6 +160,8 @@ def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch)
         reports[mode] = json.loads((tmp_path / mode / "report.json").read_text())
     offline, replay = reports["offline"], reports["replay"]
     assert replay["mode"] == "replay" and offline["picks"] == replay["picks"]
+    assert replay["model"]["node"].endswith("/idpose_estimator") and replay["model"]["device"] == "cpu"
+    assert offline["model"] == {"model_path": "", "device": "cpu", "precision": "auto"}
     assert len(offline["pairs"]) == len(replay["pairs"]) == 1 + 3
     for a, b in zip(offline["pairs"], replay["pairs"]):
         assert (a["sample"], a["n"], a["anchor_view"], a["view"]) == (b["sample"], b["n"], b["anchor_view"], b["view"])
