@@ -16,6 +16,8 @@ from idpose_core.predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessedViews, preprocess_views
 from idpose_core.solver import SolverConfig, SolverResult, estimate_poses
 
+MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
+
 
 @dataclass(frozen=True)
 class PipelineResult:
@@ -35,19 +37,21 @@ def estimate_view_poses(
     object_distance: float,
     progress: Callable[[str, int, int], None] | None = None,
     cancel: threading.Event | None = None,
+    image_size: int = MODEL_IMAGE_SIZE,
 ) -> PipelineResult:
     """Estimate the poses of N >= 2 views, the first one the anchor.
 
     ``rgbs`` N images (H_i, W_i, 3) uint8, ``alphas`` N masks (H_i, W_i) uint8 or None (then
     the mask is computed); ``anchor_polar`` (rad) is the anchor camera's polar angle around the
     object and ``object_distance`` its distance to the object centre, which sets the metric
-    scale. Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and the
-    solver's ``Cancelled`` when ``cancel`` is set.
+    scale; ``image_size`` is the side of the preprocessed views the model sees. Raises
+    ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and the solver's ``Cancelled``
+    when ``cancel`` is set.
     """
     if len(rgbs) < 2 or len(rgbs) != len(alphas):
         raise ValueError(f"need at least 2 views with one alpha entry each, got {len(rgbs)} images "
                          f"and {len(alphas)} alphas")
-    preprocessed = preprocess_views(list(rgbs), list(alphas))
+    preprocessed = preprocess_views(list(rgbs), list(alphas), size=image_size)
     solved = estimate_poses(predictor, preprocessed.images, solver_config, progress=progress, cancel=cancel)
     poses = anchor_frame_poses(solved.rel_poses, anchor_polar, object_distance)
     return PipelineResult(poses=poses, solver_result=solved, preprocessed=preprocessed)

@@ -11,7 +11,7 @@ STATUS_NAME = "idpose_estimator: estimation"
 
 @dataclass(frozen=True)
 class EstimatorStatus:
-    """What the node reports: ``state`` is idle, loading, estimating or failed."""
+    """What the node reports: ``state`` is idle, estimating or failed; ``model`` as ``ModelHolder.describe``."""
 
     state: str
     views_buffered: int
@@ -35,7 +35,7 @@ def level(status: EstimatorStatus) -> bytes:
 
 
 def summary(status: EstimatorStatus) -> str:
-    if status.state in ("estimating", "loading"):
+    if status.state == "estimating":
         return f"{status.state}: {status.stage} {status.progress_percent:.0f} %"
     if status.state == "failed":
         return f"failed: {status.last_error}"

@@ -33,7 +33,7 @@ class NodeSettings:
     device: str = field(default="auto", metadata=_spec(
         "where the model runs (auto = cuda when available)", choices=("auto", "cpu", "cuda"), read_only=True))
     precision: str = field(default="auto", metadata=_spec(
-        "model dtype (auto = float16 on cuda, float32 on cpu)",
+        "model dtype (auto = float32 on cpu, bfloat16 or float16 on cuda)",
         choices=("auto", "float32", "float16", "bfloat16"), read_only=True))
     load_model_at_startup: bool = field(default=True, metadata=_spec(
         "load the model when the node starts (false: on the first estimate)", read_only=True))
@@ -54,6 +54,8 @@ class NodeSettings:
     object_distance: float = field(default=1.0, metadata=_spec(
         "anchor camera to object centre (m): the metric scale of the published positions",
         bounds=(0.001, 1000.0)))
+    image_size: int = field(default=256, metadata=_spec(
+        "side in pixels of the preprocessed views the model sees (Zero-1-to-3: 256)", bounds=(16, 1024)))
     anchor_frame: str = field(default="", metadata=_spec(
         "frame_id of the published poses; empty = the anchor image's header.frame_id"))
     diagnostics_period: float = field(default=1.0, metadata=_spec(
@@ -71,6 +73,8 @@ SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
     "refine_steps_per_view": _spec("refinement steps per non-anchor view", bounds=(0, 1000000)),
     "refine_lr": _spec("learning rate of the refinement", bounds=(0.0, 1000.0)),
     "average_last": _spec("the answer is the mean of this many last refinement iterates", bounds=(1, 1000000)),
+    "runner_up_steps": _spec("refinement steps per view polishing the runner-up candidate (ambiguity check)",
+                             bounds=(0, 1000000)),
     "max_batch": _spec("largest batch sent to the model at once (lower it when memory is short)",
                        bounds=(1, 4096)),
     "seed": _spec("random seed of the solver's noise", bounds=(0, INT32_MAX)),

@@ -1,0 +1,297 @@
+"""The idpose_estimator node in-process with real rclpy: topics, services, parameters, results.
+
+Every test talks to the node through ROS only (a probe node publishes images, calls services
+and subscribes to the outputs); ``EstimatorNode.status()`` is read to wait for images to land.
+Reduced for speed: the tiny random Zero-1-to-3 (issue D) on views preprocessed at 32 px (its
+native size), solver with 2 azimuth candidates, probe batch 1, no adjustment steps, keep 1,
+2 refinement steps and 1 runner-up step per view (the paper: 8, 16, 10, 5, 600, 100); torch on
+one thread. Nothing here checks accuracy: the tiny model is random (see test_pipeline.py).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+import pytest
+import torch
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray
+from rcl_interfaces.msg import Log
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import Header
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from idpose_core.model_loading import load_predictor
+from idpose_core.pipeline import estimate_view_poses
+from idpose_core.synthetic.scenes import SceneRenderer, demo_objects
+from idpose_ros.estimator_node import RESULT_QOS, EstimatorNode
+from idpose_ros.parameters import current_values, solver_config
+from msg_adapters import array_to_image, compressed_to_rgb, image_to_rgb, pose_to_matrix
+
+TIMEOUT = 60.0
+FAST_SOLVER = dict(azimuth_candidates=2, probe_batch=1, adjust_steps=0, keep_top=1, refine_steps_per_view=2,
+                   average_last=1, runner_up_steps=1, image_size=32, min_view_interval=0.0)
+VIEW_SPH_DEG = [(80, 0), (85, 90), (70, 200), (95, 300)]
+
+
+def wait_for(predicate: Callable[[], Any], what: str, timeout: float = TIMEOUT) -> Any:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.02)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+@pytest.fixture(scope="module")
+def renders() -> list[tuple[np.ndarray, np.ndarray]]:
+    """Four 64 px views of a demo object: (RGB on white, alpha)."""
+    torch.set_num_threads(1)  # 2 threads on a busy 2-core machine run ~10x slower
+    with SceneRenderer(demo_objects()[0], image_size=64) as renderer:
+        return [(rgb, (mask * 255).astype(np.uint8))
+                for rgb, mask in (renderer.render(*np.radians(sph), 2.0) for sph in VIEW_SPH_DEG)]
+
+
+def header(frame_id: str, sec: int) -> Header:
+    return Header(frame_id=frame_id, stamp=Time(sec=sec, nanosec=7))
+
+
+def compressed(rgb: np.ndarray, codec: str, head: Header) -> CompressedImage:
+    ok, data = cv2.imencode(f".{codec}", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    assert ok
+    return CompressedImage(header=head, format=f"rgb8; {codec} compressed bgr8", data=data.tobytes())
+
+
+def mixed_encodings(renders) -> list[Image | CompressedImage]:
+    """The four views as rgba8 (alpha kept, the anchor), bgr8, png and jpeg: the encodings a robot sends."""
+    (rgb0, alpha0), (rgb1, _), (rgb2, _), (rgb3, _) = renders
+    return [
+        array_to_image(np.dstack([rgb0, alpha0]), "rgba8", header("anchor_cam", 42)),
+        array_to_image(np.ascontiguousarray(rgb1[..., ::-1]), "bgr8", header("cam", 43)),
+        compressed(rgb2, "png", header("cam", 44)),
+        compressed(rgb3, "jpg", header("cam", 45)),
+    ]
+
+
+class Harness:
+    """An EstimatorNode and a probe node on one multi-threaded executor spinning in a thread."""
+
+    def __init__(self, context, namespace: str, **overrides: Any) -> None:
+        self.node = EstimatorNode(context=context, namespace=namespace,
+                                  parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+        self.probe = Node("probe", namespace=namespace, context=context)
+        self.images = self.probe.create_publisher(Image, "image", 10)
+        self.compressed = self.probe.create_publisher(CompressedImage, "image/compressed", 10)
+        self.poses: list[PoseArray] = []
+        self.markers: list[MarkerArray] = []
+        self.views: list[Image] = []
+        self.logs: list[Log] = []
+        self.diagnostics: list[DiagnosticArray] = []
+        for kind, topic, sink in ((PoseArray, "idpose_estimator/poses", self.poses),
+                                  (MarkerArray, "idpose_estimator/markers", self.markers),
+                                  (Image, "idpose_estimator/views", self.views)):
+            self.probe.create_subscription(kind, topic, sink.append, RESULT_QOS)
+        self.probe.create_subscription(Log, "/rosout", self._on_log,  # latched: logs from before the probe joined
+                                       QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 10)
+        self.clients = {name: self.probe.create_client(Trigger, f"idpose_estimator/{name}")
+                        for name in ("capture", "estimate", "cancel", "reset")}
+        self.executor = MultiThreadedExecutor(num_threads=4, context=context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.probe)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        wait_for(lambda: self.images.get_subscription_count() and self.compressed.get_subscription_count(),
+                 "the node's image subscriptions")
+
+    def _on_log(self, entry: Log) -> None:
+        if entry.name.endswith("idpose_estimator"):
+            self.logs.append(entry)
+
+    def logged(self, text: str) -> list[str]:
+        return [entry.msg for entry in self.logs if text in entry.msg]
+
+    def call(self, service: str) -> Trigger.Response:
+        client = self.clients[service]
+        assert client.wait_for_service(TIMEOUT), service
+        future = client.call_async(Trigger.Request())
+        return wait_for(future.result, f"the answer of ~/{service}")
+
+    def send(self, msg: Image | CompressedImage) -> None:
+        (self.images if isinstance(msg, Image) else self.compressed).publish(msg)
+
+    def send_view(self, msg: Image | CompressedImage) -> None:
+        """Publish one image and wait until the node has kept it as a view."""
+        before = self.node.status().views_buffered
+        self.send(msg)
+        wait_for(lambda: self.node.status().views_buffered == before + 1, "the view to be buffered")
+
+    def state(self) -> str:
+        return self.node.status().state
+
+    def close(self) -> None:
+        assert self.node.stop(timeout=10.0)
+        self.executor.shutdown(timeout_sec=2.0)
+        self.thread.join(5.0)
+        self.probe.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def harness(ros_context, tiny_model_dir, request):
+    """A node per test, in a namespace of its own, with the tiny model and the fast solver."""
+    made = []
+
+    def make(**overrides: Any) -> Harness:
+        settings = {"model_path": str(tiny_model_dir), **FAST_SOLVER, **overrides}
+        made.append(Harness(ros_context, f"/{request.node.name.split('[')[0]}_{len(made)}", **settings))
+        return made[-1]
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harness, renders, tiny_model_dir):
+    h = harness(diagnostics_period=0.1)
+    assert h.call("estimate").message == "need at least 2 buffered views to estimate, have 0"
+    messages = mixed_encodings(renders)
+    malformed = [
+        Image(header=header("cam", 50), encoding="rgb8", height=64, width=64, step=192, data=b"\x00" * 10),
+        Image(header=header("cam", 51), encoding="no_such_encoding", height=2, width=2, step=6, data=b"\x00" * 12),
+        CompressedImage(header=header("cam", 52), format="png", data=b"not a png at all"),
+    ]
+    h.send_view(messages[0])
+    h.send_view(messages[1])
+    for bad in malformed:  # mid-stream: logged and dropped, the buffer untouched
+        h.send(bad)
+    h.send_view(messages[2])
+    h.send_view(messages[3])
+    assert h.node.status().views_buffered == 4
+    wait_for(lambda: h.logged("dropped a malformed message"), "the malformed-message warning on /rosout")
+
+    assert h.call("estimate").success
+    (poses,) = wait_for(lambda: h.poses, "the PoseArray")
+    assert poses.header.frame_id == "anchor_cam"
+    assert (poses.header.stamp.sec, poses.header.stamp.nanosec) == (42, 7)
+    assert len(poses.poses) == 4
+    matrices = np.stack([pose_to_matrix(p) for p in poses.poses])
+    quaternions = np.array([[p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w] for p in poses.poses])
+    np.testing.assert_allclose(np.linalg.norm(quaternions, axis=1), 1.0, atol=1e-9)
+    np.testing.assert_allclose(matrices[0], np.eye(4), atol=1e-9)
+
+    # The node ran exactly the shared pipeline on exactly these decoded views, in capture order.
+    decoded = [image_to_rgb(m) if isinstance(m, Image) else compressed_to_rgb(m) for m in messages]
+    values = current_values(h.node)
+    expected = estimate_view_poses(load_predictor(str(tiny_model_dir)), [rgb for rgb, _ in decoded],
+                                   [alpha for _, alpha in decoded], solver_config(values),
+                                   np.radians(values["anchor_polar_deg"]), values["object_distance"], image_size=32)
+    np.testing.assert_allclose(matrices, expected.poses, atol=1e-6)
+
+    markers = wait_for(lambda: h.markers, "the markers")[0]
+    assert {m.header.frame_id for m in markers.markers} == {"anchor_cam"}
+    mosaic = wait_for(lambda: h.views, "the views image")[0]
+    assert (mosaic.encoding, mosaic.height, mosaic.width, mosaic.header.frame_id) == ("rgb8", 32, 4 * 32, "anchor_cam")
+    wait_for(lambda: any(h.logged("estimate: refinement 100 %")), "the progress log")
+
+    def last_diagnostics() -> dict[str, str]:
+        ours = [s for array in h.diagnostics for s in array.status if s.name.startswith("idpose_estimator")]
+        return {kv.key: kv.value for kv in ours[-1].values} if ours else {}
+    report = wait_for(lambda: (d := last_diagnostics()) and "view_3_score" in d and d, "diagnostics with scores")
+    assert (report["state"], report["views_buffered"], report["model"]) == ("idle", "4", "loaded")
+    assert float(report["last_run_seconds"]) > 0 and "view_4_score" not in report
+    assert h.state() == "idle" and h.node.status().views_buffered == 4, "a finished estimate keeps the views"
+
+
+def test_cancel_and_reset_during_a_run(harness, renders):
+    h = harness(refine_steps_per_view=1_000_000, average_last=1)
+    for msg in mixed_encodings(renders)[:2]:
+        h.send_view(msg)
+    assert h.call("cancel").message == "no estimate is running"
+
+    assert h.call("estimate").success
+    wait_for(lambda: h.node.status().stage == "refinement", "the refinement stage")
+    busy = h.call("estimate")
+    assert not busy.success and "busy" in busy.message
+    cancelled = h.call("cancel")
+    assert cancelled.success and "2 views stay buffered" in cancelled.message
+    wait_for(lambda: h.state() == "idle", "the cancelled run to stop", timeout=10.0)
+    assert h.node.status().last_error == "cancelled" and h.node.status().views_buffered == 2
+
+    assert h.call("estimate").success, "a cancelled estimate leaves the buffer for a retry"
+    wait_for(lambda: h.node.status().stage == "refinement", "the refinement stage")
+    reset = h.call("reset")
+    assert reset.success and reset.message == "dropped 2 views (cancelled the running estimate)"
+    assert h.node.status().views_buffered == 0 and h.state() == "idle"
+    assert h.call("estimate").message == "need at least 2 buffered views to estimate, have 0"
+    time.sleep(0.3)
+    assert h.poses == [], "a cancelled estimate publishes nothing"
+
+
+def test_on_request_capture_lazy_model_and_automatic_estimate(harness, renders):
+    h = harness(capture_mode="on_request", load_model_at_startup=False, views_per_estimate=2,
+                anchor_frame="object_frame", object_distance=0.5)
+    assert h.node.status().model == "not loaded"
+    refused = h.call("capture")
+    assert not refused.success and refused.message == "no new image received since the last capture"
+    (rgb0, _), (rgb1, _) = renders[:2]
+    for rgb, sec in ((rgb0, 10), (rgb1, 11)):
+        mono = array_to_image(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY), "mono8", header("cam_optical", sec))
+        h.send(mono)
+        answer = wait_for(lambda: (a := h.call("capture")).success and a, "a capture of the published image")
+        assert answer.message.startswith(f"captured view {sec - 9}")
+    (poses,) = wait_for(lambda: h.poses, "the PoseArray of the automatic estimate")
+    assert poses.header.frame_id == "object_frame" and poses.header.stamp.sec == 10 and len(poses.poses) == 2
+    assert h.node.status().model == "loaded"
+    distance = np.linalg.norm([poses.poses[1].position.x, poses.poses[1].position.y, poses.poses[1].position.z])
+    assert 0 < distance < 4 * 0.5, "positions are on the object_distance scale"
+
+
+def test_a_missing_model_keeps_the_node_up_and_refuses_estimates(harness, renders, tmp_path):
+    missing = tmp_path / "zero123-xl"
+    h = harness(model_path=str(missing))
+    wait_for(lambda: h.state() == "failed", "the model load to fail")
+    for msg in mixed_encodings(renders)[:2]:
+        h.send_view(msg)
+    refusal = h.call("estimate")
+    assert not refusal.success
+    assert refusal.message.startswith(f"no model available: ModelLoadError: {missing}: no such folder or file")
+    assert "huggingface" in refusal.message, "the reason says what to download"
+    errors = wait_for(lambda: [e for e in h.logs if e.level == Log.ERROR], "the error log")
+    time.sleep(0.3)
+    assert len([e for e in h.logs if e.level == Log.ERROR]) == 1 and str(missing) in errors[0].msg
+    assert h.node.status().model.startswith("unavailable")
+
+
+def test_parameters_are_checked_through_the_parameter_service(harness):
+    h = harness()
+    client = AsyncParameterClient(h.probe, "idpose_estimator")
+    assert client.wait_for_services(TIMEOUT)
+
+    def set_one(name: str, value: Any):
+        future = client.set_parameters([Parameter(name, value=value)])
+        return wait_for(future.result, f"setting {name}").results[0]
+
+    assert "out of range" in set_one("max_views", 100).reason.lower()
+    assert "capture_mode must be one of auto, on_request" in set_one("capture_mode", "burst").reason
+    assert "read-only" in set_one("model_path", "/elsewhere").reason.lower()
+    assert set_one("max_views", 3).successful
+    assert h.node.status().max_views == 3, "the buffer bound follows the parameter"
+
+
+def test_an_invalid_start_up_parameter_is_refused_with_its_reason(ros_context):
+    with pytest.raises(InvalidParameterValueException, match="variant must be one of full, tr, naive"):
+        EstimatorNode(context=ros_context, namespace="/bad_start",
+                      parameter_overrides=[Parameter("variant", value="best")])
