@@ -10,11 +10,10 @@ cameras_<sample>.png into ``--out``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Protocol, Sequence
 
@@ -105,10 +104,10 @@ class EvaluationRun:
 
     picks: list[list[int]]
     view_counts: list[int]
-    records: list[dict[str, Any]] = dataclasses.field(default_factory=list)
-    estimates: list[dict[str, Any]] = dataclasses.field(default_factory=list)
-    true_cameras: dict[int, np.ndarray] = dataclasses.field(default_factory=dict)  # sample -> (k, 4, 4) OpenGL c2w
-    predicted_cameras: dict[int, np.ndarray] = dataclasses.field(default_factory=dict)  # sample -> largest n's
+    records: list[dict[str, Any]] = field(default_factory=list)
+    estimates: list[dict[str, Any]] = field(default_factory=list)
+    true_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> (k, 4, 4) OpenGL c2w
+    predicted_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> largest n's
 
     @property
     def aggregates(self) -> dict[str, dict[str, float | int]]:
@@ -171,7 +170,7 @@ def run_evaluation(bag_path: Path, image_topic: str, bag: BagViews, run: Evaluat
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="evaluate_bag", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="evaluate_bag", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
     parser.add_argument("bag", type=Path, help="rosbag2 bag: a folder with metadata.yaml, or a .mcap/.db3 file")
     parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
     parser.add_argument("--mode", choices=("offline", "replay"), default="offline",
@@ -226,6 +225,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"evaluate_bag: {len(bag.skipped)} of {len(bag.views)} views skipped (reasons in report.json), "
                   f"e.g. view {next(iter(bag.skipped))}: {next(iter(bag.skipped.values()))}", file=sys.stderr)
         run = plan_evaluation(bag, args.image_topic, args.samples, args.seed, args.n)
+        if run.view_counts != sorted(set(args.n)):
+            print(f"evaluate_bag: {len(bag.pool)} usable views: evaluating sets of "
+                  f"{', '.join(map(str, run.view_counts))} views only", file=sys.stderr)
         estimator = make_estimator(args, values)
         try:
             run_evaluation(args.bag, args.image_topic, bag, run, estimator, args.object_center, args.up)

@@ -112,7 +112,7 @@ def make_bag(out: Path, storage: str, object_set: str, object_name: str | None, 
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="make_synthetic_bag", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="make_synthetic_bag", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
     parser.add_argument("out", type=Path, help="bag folder to create (must not exist)")
     parser.add_argument("--storage", choices=("sqlite3", "mcap"), default="mcap")
     parser.add_argument("--objects", choices=tuple(OBJECT_SETS), default="demo", help="object set")

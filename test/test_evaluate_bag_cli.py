@@ -10,7 +10,8 @@ import pytest
 
 from idpose_core.transforms import rigid_transform
 from idpose_ros import evaluate_bag, make_synthetic_bag
-from idpose_ros.bag_io import BagWriter
+from idpose_ros.bag_io import BagError, BagWriter
+from idpose_ros.evaluate_bag import usable_view_counts
 from idpose_ros.make_synthetic_bag import write_rgba_image, write_tf
 
 SECOND = 1_000_000_000
@@ -82,3 +83,10 @@ def test_no_traceback_from_the_command_line(tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr and "does not exist" in result.stderr
+
+
+def test_small_pools_evaluate_the_view_counts_they_can_hold():
+    assert usable_view_counts([8, 2, 4, 6], pool_size=5) == [2, 4]
+    assert usable_view_counts([2, 4, 6, 8], pool_size=30) == [2, 4, 6, 8]
+    with pytest.raises(BagError, match="only 3 usable views: cannot evaluate sets of 4, 6 views"):
+        usable_view_counts([4, 6], pool_size=3)
