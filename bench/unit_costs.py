@@ -1,0 +1,55 @@
+"""Measured unit costs (``bench/results/step_cost.json``) and full-size projections: counts x unit costs.
+
+Ours: every differentiated sample costs one measured refinement step (``ours_step``, batch 1 - the
+solver batches adjustment steps, so this is an upper bound); every forward-only sample costs 1/16 of
+a measured probe (``ours_probe``, batch 16; the solver batches up to ``max_batch`` = 64); each view
+is encoded once, costed as one official per-step encode (VAE on two images + CLIP on one, so an upper
+bound for one view's VAE + CLIP). Official: probes x ``official_probe`` + steps x ``official_step``.
+Wall-clock medians of the step_cost run are used; model loading is left out on both sides.
+"""
+from __future__ import annotations
+
+import json
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+STEP_COST_FILE = RESULTS / "step_cost.json"
+PROBE_SAMPLES = 16
+
+
+@dataclass(frozen=True)
+class UnitCosts:
+    """Seconds on this CPU for the full-size model (float32, 256 px, ``threads`` torch threads)."""
+
+    ours_step: float
+    ours_probe: float
+    official_step: float
+    official_probe: float
+    encode_per_view: float
+    threads: int
+
+    @classmethod
+    def load(cls, path: Path = STEP_COST_FILE) -> UnitCosts:
+        """Read the medians of a ``bench/step_cost.py`` run; FileNotFoundError names the command."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path} is missing: run `python bench/step_cost.py` first (~12 GB, minutes)")
+        report = json.loads(path.read_text())
+        median = report["median"]
+        encode = statistics.median(run["parts"]["encode"] for run in report["runs"]["official_step"])
+        return cls(ours_step=median["ours_step"]["seconds"], ours_probe=median["ours_probe"]["seconds"],
+                   official_step=median["official_step"]["seconds"],
+                   official_probe=median["official_probe"]["seconds"],
+                   encode_per_view=encode, threads=int(report["machine"]["threads"]))
+
+    def ours_seconds(self, views: int, forward_samples: int, backward_samples: int) -> float:
+        """Projected seconds of one estimate by this project's solver from its sample counters."""
+        forward_only = forward_samples - backward_samples
+        return (views * self.encode_per_view + backward_samples * self.ours_step
+                + forward_only * self.ours_probe / PROBE_SAMPLES)
+
+    def official_seconds(self, probes: int, steps: int) -> float:
+        """Projected seconds of one official estimate from its probe and step counts."""
+        return probes * self.official_probe + steps * self.official_step
