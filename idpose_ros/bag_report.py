@@ -66,18 +66,18 @@ def plot_cameras(path: Path, true_c2w: np.ndarray, pred_c2w: np.ndarray, views: 
     plt.close(figure)
 
 
-def write_report(out: Path, args: argparse.Namespace, solver_values: dict[str, Any], model: dict[str, Any],
+def write_report(out: Path, args: argparse.Namespace, values: dict[str, Any], model: dict[str, Any],
                  bag: BagViews, run: EvaluationRun, seconds: float) -> str:
     """Write report.json, report.md and cameras_<sample>.png into ``out``; returns the markdown table."""
     out.mkdir(parents=True, exist_ok=True)
     aggregates = run.aggregates
-    method = f"ID-Pose ({solver_values['variant']})"
+    method = f"ID-Pose ({values['variant']})"
     table = markdown_table(aggregates, method)
     views_by_id = {view.view_id: view for view in bag.views}
     report = {
         "bag": str(args.bag), "image_topic": args.image_topic, "ground_truth": ground_truth_source(args),
         "mode": args.mode, "model": model,
-        "solver": {"preset": args.preset, **solver_values},
+        "node_parameters": {"solver_preset": args.preset, **values},
         "protocol": {"samples": args.samples, "seed": args.seed, "pick_size": len(run.picks[0]),
                      "view_counts": run.view_counts, "object_center": list(args.object_center), "up": list(args.up),
                      "radius_unit": "relative radii in Zero-1-to-3 units: the anchor distance is 1.85"},

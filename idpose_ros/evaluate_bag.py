@@ -46,8 +46,8 @@ from idpose_ros.replay import ReplayError, ReplayEstimator
 
 ImageMessage = Image | CompressedImage
 Progress = Callable[[str, int, int], None]
-# The node accepts anchor polar angles in this range (its parameter bounds); both modes clip alike.
-ANCHOR_POLAR_RANGE_DEG = next(spec["bounds"] for name, _, spec in parameter_table() if name == "anchor_polar_deg")
+NODE_BOUNDS = {name: spec["bounds"] for name, _, spec in parameter_table()}
+DEFAULT_IMAGE_SIZE = next(default for name, default, _ in parameter_table() if name == "image_size")
 
 
 class ViewSetEstimator(Protocol):
@@ -59,8 +59,10 @@ class ViewSetEstimator(Protocol):
                  progress: Progress | None = None) -> ViewSetEstimate: ...
 
 
-def solver_values(preset: str, variant: str | None, overrides: Sequence[str]) -> dict[str, Any]:
-    """The node's solver parameter values for a preset, a variant and ``NAME=VALUE`` overrides."""
+def node_values(preset: str, variant: str | None, overrides: Sequence[str], image_size: int = DEFAULT_IMAGE_SIZE
+                ) -> dict[str, Any]:
+    """The node's parameter values that shape an estimate: the solver's (a preset, a variant and
+    ``NAME=VALUE`` overrides) and ``image_size``; both modes run on exactly these."""
     config = SolverConfig.preset(preset)
     values = {name: getattr(config, name) for name in SOLVER_PARAMETERS}
     if variant is not None:
@@ -76,7 +78,10 @@ def solver_values(preset: str, variant: str | None, overrides: Sequence[str]) ->
         except ValueError:
             raise ValueError(f"--solver-param {item!r}: {name} takes a {kind.__name__}") from None
     solver_config({**values, "anchor_polar_deg": 90.0}).validate()
-    return values
+    low, high = NODE_BOUNDS["image_size"]
+    if not low <= image_size <= high:
+        raise ValueError(f"--image-size must be in [{low}, {high}] pixels, got {image_size}")
+    return {**values, "image_size": image_size}
 
 
 class OfflineEstimator:
@@ -92,7 +97,8 @@ class OfflineEstimator:
         config = solver_config({**self.values, "anchor_polar_deg": anchor_polar_deg})
         start = time.perf_counter()
         result = estimate_view_poses(self.predictor, [rgb for rgb, _ in decoded], [alpha for _, alpha in decoded],
-                                     config, math.radians(anchor_polar_deg), object_distance, progress=progress)
+                                     config, math.radians(anchor_polar_deg), object_distance, progress=progress,
+                                     image_size=self.values["image_size"])
         solved = result.solver_result
         return ViewSetEstimate(result.poses, np.asarray(solved.scores), np.asarray(solved.ambiguous),
                                time.perf_counter() - start)
@@ -139,7 +145,7 @@ def run_evaluation(bag_path: Path, image_topic: str, bag: BagViews, run: Evaluat
     """Estimate the first n views of each pick of ``run`` and score every (anchor, view) pair into it."""
     picks = run.picks
     messages = load_view_messages(bag_path, image_topic, {v for pick in picks for v in pick})
-    low, high = ANCHOR_POLAR_RANGE_DEG
+    low, high = NODE_BOUNDS["anchor_polar_deg"]  # the node's range: both modes clip alike
     with tqdm(total=len(picks) * len(run.view_counts), desc="estimating", unit="set", file=sys.stderr,
               disable=not show_progress) as bar:
         for sample, pick in enumerate(picks):
@@ -195,6 +201,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--variant", choices=("full", "tr", "naive"), default=None, help="solver variant")
     parser.add_argument("--solver-param", action="append", default=[], metavar="NAME=VALUE",
                         help="override one of the node's solver parameters (repeatable)")
+    parser.add_argument("--image-size", type=int, default=DEFAULT_IMAGE_SIZE,
+                        help=f"side of the preprocessed views the model sees (default {DEFAULT_IMAGE_SIZE})")
     parser.add_argument("--node", default=None,
                         help="replay: fully qualified name of a running estimator node (default: start one)")
     parser.add_argument("--timeout", type=float, default=3600.0, help="replay: seconds to wait for one estimate")
@@ -219,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     started = time.perf_counter()
     try:
-        values = solver_values(args.preset, args.variant, args.solver_param)
+        values = node_values(args.preset, args.variant, args.solver_param, args.image_size)
         bag = read_bag_views(args.bag, args.image_topic, args.world_frame, args.gt_topic, args.gt_tolerance)
         if bag.skipped:
             print(f"evaluate_bag: {len(bag.skipped)} of {len(bag.views)} views skipped (reasons in report.json), "

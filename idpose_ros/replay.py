@@ -56,9 +56,9 @@ def _stamp_ns(stamp) -> int:
 class ReplayEstimator:
     """A ``ViewSetEstimator`` that goes through the estimator node; call ``close()`` when done."""
 
-    def __init__(self, solver_values: dict[str, Any], model_path: str = "", device: str = "auto",
+    def __init__(self, values: dict[str, Any], model_path: str = "", device: str = "auto",
                  precision: str = "auto", node_name: str | None = None, timeout: float = 3600.0):
-        self.solver_values, self.timeout = solver_values, timeout
+        self.values, self.timeout = values, timeout
         self._context = rclpy.Context()
         rclpy.init(context=self._context)
         self._executor = MultiThreadedExecutor(num_threads=4, context=self._context)
@@ -172,7 +172,7 @@ class ReplayEstimator:
     # ----- one view set ---------------------------------------------------------------------------------------------
     def __call__(self, messages: Sequence[Image | CompressedImage], anchor_polar_deg: float, object_distance: float,
                  progress: Callable[[str, int, int], None] | None = None) -> ViewSetEstimate:
-        self._set_parameters({**self.solver_values, "anchor_polar_deg": float(anchor_polar_deg),
+        self._set_parameters({**self.values, "anchor_polar_deg": float(anchor_polar_deg),
                               "object_distance": float(object_distance), "capture_mode": "on_request",
                               "views_per_estimate": 0, "max_views": PICK_SIZE, "anchor_frame": ""})
         self._call("reset")

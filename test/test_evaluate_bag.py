@@ -19,7 +19,7 @@ from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, random_cam
 from idpose_ros import estimator_node, evaluate_bag
 from idpose_ros.bag_report import write_report
 from idpose_ros.bag_views import read_bag_views
-from idpose_ros.evaluate_bag import OfflineEstimator, parse_args, plan_evaluation, run_evaluation, solver_values
+from idpose_ros.evaluate_bag import OfflineEstimator, parse_args, plan_evaluation, run_evaluation, node_values
 from idpose_ros.make_synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, make_bag
 
 SEED, VIEWS, SIZE = 5, 8, 64
@@ -74,7 +74,7 @@ def oracle():
 def oracle_run(demo_bag, oracle):
     torch.set_num_threads(2)
     bag = read_bag_views(demo_bag, IMAGE_TOPIC)
-    estimator = OfflineEstimator(oracle, solver_values("fast", None, ORACLE_SOLVER))
+    estimator = OfflineEstimator(oracle, node_values("fast", None, ORACLE_SOLVER))
     run = plan_evaluation(bag, IMAGE_TOPIC, samples=1, seed=0, view_counts=(2, 4, 8))
     run_evaluation(demo_bag, IMAGE_TOPIC, bag, run, estimator, center=(0, 0, 0), up=(0, 0, 1), show_progress=False)
     return bag, run
@@ -96,7 +96,7 @@ def test_the_oracle_scores_100_percent_on_every_view_count(oracle_run, oracle):
 
 def test_tf_and_pose_topic_ground_truth_give_the_same_numbers(demo_bag, oracle):
     """Same picks, same estimates: the two ground-truth sources score identically (one 2-view set each)."""
-    estimator = OfflineEstimator(oracle, solver_values("fast", None, ORACLE_SOLVER))
+    estimator = OfflineEstimator(oracle, node_values("fast", None, ORACLE_SOLVER))
     records = []
     for gt_topic in (None, POSE_TOPIC):
         bag = read_bag_views(demo_bag, IMAGE_TOPIC, gt_topic=gt_topic)
@@ -116,11 +116,13 @@ def test_report_files(tmp_path, demo_bag, oracle_run):
     bag, run = oracle_run
     args = parse_args([str(demo_bag), "--out", str(tmp_path / "out"), "--samples", "1", "--n", "2", "4", "8",
                        "--preset", "fast"] + [x for item in ORACLE_SOLVER for x in ("--solver-param", item)])
-    table = write_report(args.out, args, solver_values("fast", None, ORACLE_SOLVER), {"predictor": "oracle"}, bag,
+    table = write_report(args.out, args, node_values("fast", None, ORACLE_SOLVER), {"predictor": "oracle"}, bag,
                          run, seconds=1.5)
     report = json.loads((args.out / "report.json").read_text())
     assert report["aggregates"]["all"]["rot_acc_15"] == 1.0 and len(report["pairs"]) == 11
-    assert report["solver"]["refine_steps_per_view"] == 30 and report["solver"]["variant"] == "full"
+    parameters = report["node_parameters"]
+    assert parameters["refine_steps_per_view"] == 30 and parameters["variant"] == "full"
+    assert parameters["image_size"] == 256 and parameters["solver_preset"] == "fast"
     assert report["views"] == {"total": VIEWS, "usable": VIEWS, "skipped": []}
     assert {"sample", "n", "anchor_view", "view", "pred_rel_sph", "true_rel_sph", "rot_err_deg", "pos_err",
             "score", "ambiguous", "seconds"} <= set(report["pairs"][0])
@@ -132,16 +134,19 @@ def test_report_files(tmp_path, demo_bag, oracle_run):
     assert image is not None and image.shape[0] > 100
 
 
-def test_solver_values_follow_the_node_parameters():
-    values = solver_values("fast", "naive", ["refine_steps_per_view=7", "adjust_lr=0.5"])
+def test_node_values_follow_the_node_parameters():
+    values = node_values("fast", "naive", ["refine_steps_per_view=7", "adjust_lr=0.5"])
     assert values["variant"] == "naive" and values["refine_steps_per_view"] == 7 and values["adjust_lr"] == 0.5
     assert values["probe_batch"] == 4  # from the fast preset
     with pytest.raises(ValueError, match="expected NAME=VALUE"):
-        solver_values("default", None, ["probe_t=0.3"])  # not a node parameter
+        node_values("default", None, ["probe_t=0.3"])  # not a node parameter
     with pytest.raises(ValueError, match="takes a int"):
-        solver_values("default", None, ["keep_top=many"])
+        node_values("default", None, ["keep_top=many"])
     with pytest.raises(ValueError, match="keep_top"):
-        solver_values("default", None, ["keep_top=0"])
+        node_values("default", None, ["keep_top=0"])
+    assert node_values("default", None, [], image_size=64)["image_size"] == 64
+    with pytest.raises(ValueError, match="image-size"):
+        node_values("default", None, [], image_size=4)
 
 
 def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch):
@@ -152,7 +157,8 @@ def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch)
     """
     monkeypatch.setattr(evaluate_bag, "load_predictor", lambda *args, **kwargs: oracle)
     monkeypatch.setattr(estimator_node, "load_predictor", lambda *args, **kwargs: oracle)
-    common = [str(demo_bag), "--samples", "1", "--seed", "1", "--n", "2", "4", "--preset", "fast", "--device", "cpu"]
+    common = [str(demo_bag), "--samples", "1", "--seed", "1", "--n", "2", "4", "--preset", "fast", "--device", "cpu",
+              "--image-size", "128"]
     common += [x for item in ORACLE_SOLVER for x in ("--solver-param", item)]
     reports = {}
     for mode in ("offline", "replay"):
@@ -162,6 +168,7 @@ def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch)
     assert replay["mode"] == "replay" and offline["picks"] == replay["picks"]
     assert replay["model"]["node"].endswith("/idpose_estimator") and replay["model"]["device"] == "cpu"
     assert offline["model"] == {"model_path": "", "device": "cpu", "precision": "auto"}
+    assert offline["node_parameters"]["image_size"] == replay["node_parameters"]["image_size"] == 128
     assert len(offline["pairs"]) == len(replay["pairs"]) == 1 + 3
     for a, b in zip(offline["pairs"], replay["pairs"]):
         assert (a["sample"], a["n"], a["anchor_view"], a["view"]) == (b["sample"], b["n"], b["anchor_view"], b["view"])
