@@ -90,3 +90,17 @@ def test_small_pools_evaluate_the_view_counts_they_can_hold():
     assert usable_view_counts([2, 4, 6, 8], pool_size=30) == [2, 4, 6, 8]
     with pytest.raises(BagError, match="only 3 usable views: cannot evaluate sets of 4, 6 views"):
         usable_view_counts([4, 6], pool_size=3)
+
+
+def test_ros2_run_finds_both_commands_and_the_installed_demo_bag(workspace):
+    """As `ros2 run idpose_ros evaluate_bag` runs it: the installed script on the installed demo bag."""
+    prefix = workspace / "install" / "idpose_ros"
+    bag = prefix / "share" / "idpose_ros" / "data" / "demo_bag"
+    assert (bag / "metadata.yaml").is_file() and (bag / "demo_bag.mcap").is_file()
+    for name in ("evaluate_bag", "make_synthetic_bag"):
+        assert (prefix / "lib" / "idpose_ros" / name).is_file()
+    script = (f". {workspace / 'install' / 'setup.sh'} && "
+              f"{prefix / 'lib' / 'idpose_ros' / 'evaluate_bag'} {bag} --image-topic /nope")
+    result = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "topic '/nope' is not in the bag" in result.stderr and "/camera/image_raw [sensor_msgs/msg/Image]" in result.stderr
