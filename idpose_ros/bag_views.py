@@ -6,6 +6,7 @@ here) into ``idpose_core.transforms.TransformBuffer``. Glue only: no maths of it
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CompressedImage, Image
+from tqdm import tqdm
 
 from idpose_core.evaluation import match_stamps
 from idpose_core.transforms import TransformBuffer, TransformLookupError
@@ -64,8 +66,10 @@ def decode_view(message: Image | CompressedImage) -> tuple[np.ndarray, np.ndarra
 def _scan_images(reader, image_topic: str) -> tuple[list[ViewInfo], dict[int, str]]:
     """Header of every image on the topic (in bag order) and the ids of those that do not decode."""
     views, broken = [], {}
-    for view_id, (connection, _, raw) in enumerate(
-            reader.messages(connections=topic_connections(reader, image_topic, tuple(IMAGE_TYPES)))):
+    connections = topic_connections(reader, image_topic, tuple(IMAGE_TYPES))
+    scan = tqdm(reader.messages(connections=connections), total=sum(c.msgcount for c in connections),
+                desc=f"reading {image_topic}", unit="image", file=sys.stderr, leave=False)
+    for view_id, (connection, _, raw) in enumerate(scan):
         message = deserialize_message(raw, IMAGE_TYPES[connection.msgtype])
         try:
             decode_view(message)
