@@ -194,7 +194,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--samples", type=int, default=5, help="random picks of 8 views (default 5)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the picks")
     parser.add_argument("--n", type=int, nargs="+", default=list(VIEW_COUNTS), help="view counts (default 2 4 6 8)")
-    parser.add_argument("--model-path", default="", help="Zero-1-to-3 diffusers folder or .ckpt (default: the embedded demo model)")
+    parser.add_argument("--model-path", default="",
+                        help="Zero-1-to-3 diffusers folder or .ckpt (default: the embedded demo model)")
     parser.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
     parser.add_argument("--precision", choices=("auto", "float32", "float16", "bfloat16"), default="auto")
     parser.add_argument("--preset", choices=("default", "fast"), default="default", help="solver preset")
