@@ -6,7 +6,10 @@ image callbacks, services and diagnostics responsive.
 """
 from __future__ import annotations
 
+import logging
 import math
+import os
+import signal
 import sys
 import threading
 import time
@@ -19,6 +22,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
 from sensor_msgs.msg import CompressedImage, Image
@@ -38,6 +42,7 @@ from msg_adapters import AdapterError, array_to_image, camera_markers, compresse
 
 NODE_NAME = "idpose_estimator"
 SHUTDOWN_TIMEOUT = 1.5  # s to let a cancelled estimate stop on Ctrl-C (the node must exit within 2 s)
+SPIN_PERIOD = 0.1  # s: the main thread sees Ctrl-C at least this often
 RESET_TIMEOUT = 5.0  # s ~/reset waits for a cancelled estimate before clearing the buffer anyway
 THROTTLE = 5.0  # s between two log lines about dropped images
 MARKER_DEPTH = 0.15  # frustum depth as a share of object_distance
@@ -276,9 +281,18 @@ class EstimatorNode(Node):
         return self._worker.wait(timeout)
 
 
-def main(args: list[str] | None = None) -> int:
-    """Entry point of `ros2 run idpose_ros estimator`; returns once the node has shut down."""
-    rclpy.init(args=args)
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def run(args: list[str] | None = None) -> int:
+    """Run the node until Ctrl-C (SIGINT/SIGTERM) or a ROS shutdown; returns the exit code (2: invalid parameters).
+
+    rclpy's own signal handler would invalidate the context at once; here the signal raises
+    KeyboardInterrupt in the spin loop instead, so the node still logs while it cancels and stops.
+    """
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         node = EstimatorNode()
     except ParameterException as exc:
@@ -288,17 +302,32 @@ def main(args: list[str] | None = None) -> int:
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     try:
-        executor.spin()
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD)
     except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        node.get_logger().info("interrupted: shutting down")
     finally:
         if not node.stop():
-            node.get_logger().warning("the worker did not stop in time; exiting anyway (it is a daemon thread)")
+            node.get_logger().warning("the estimate did not stop in time; exiting anyway (it is a daemon thread)")
         executor.shutdown(timeout_sec=0.2)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
 
 
+def main() -> None:
+    """Entry point of `ros2 run idpose_ros estimator`.
+
+    Exits with ``os._exit`` once ROS is shut down and the output flushed: the interpreter's own
+    teardown of torch, diffusers and transformers takes seconds, and Ctrl-C must end the node
+    within 2 s even in the middle of an estimate.
+    """
+    code = run()
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

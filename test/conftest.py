@@ -2,20 +2,24 @@
 
 ROS_DOMAIN_ID is drawn at random (1..200) and discovery kept on this host when pytest imports
 this file, before any test calls rclpy.init, so concurrent test runs on the machine never see
-each other's nodes; subprocesses inherit both variables.
+each other's nodes; subprocesses inherit both variables. Torch gets one OpenMP thread unless
+OMP_NUM_THREADS says otherwise (set before torch is imported): on a busy 2-core machine, two
+threads made the tiny model's steps 7-10x slower, worst on threads other than the main one.
 """
 import os
 import random
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import pytest
 
 os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 200))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 ROOT = Path(__file__).resolve().parents[1]
 COLCON = Path(sys.executable).with_name("colcon")
@@ -69,3 +73,33 @@ def ros_context():
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     yield context
     rclpy.shutdown(context=context)
+
+
+def poll_until(predicate: Callable[[], Any], what: str, timeout: float = 60.0) -> Any:
+    """Poll ``predicate`` every 20 ms until it returns something truthy (returned); fails naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.02)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+@pytest.fixture(scope="session")
+def wait_for() -> Callable[..., Any]:
+    """``wait_for(predicate, what, timeout=60)``: for tests that wait on ROS traffic."""
+    return poll_until
+
+
+@pytest.fixture(scope="session")
+def object_views() -> list[tuple[Any, Any]]:
+    """Four 64 px renders of a demo object, (RGB uint8 on white, alpha uint8), polar 70-95 deg around it."""
+    import numpy as np
+
+    from idpose_core.synthetic.scenes import SceneRenderer, demo_objects
+
+    with SceneRenderer(demo_objects()[0], image_size=64) as renderer:
+        return [(rgb, (mask * 255).astype(np.uint8))
+                for rgb, mask in (renderer.render(np.radians(polar), np.radians(azimuth), 2.0)
+                                  for polar, azimuth in ((80, 0), (85, 90), (70, 200), (95, 300)))]

@@ -5,7 +5,7 @@ and subscribes to the outputs); ``EstimatorNode.status()`` is read to wait for i
 Reduced for speed: the tiny random Zero-1-to-3 (issue D) on views preprocessed at 32 px (its
 native size), solver with 2 azimuth candidates, probe batch 1, no adjustment steps, keep 1,
 2 refinement steps and 1 runner-up step per view (the paper: 8, 16, 10, 5, 600, 100); torch on
-one thread. Nothing here checks accuracy: the tiny model is random (see test_pipeline.py).
+one thread (test/conftest.py). Nothing here checks accuracy: the tiny model is random (see test_pipeline.py).
 """
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 import pytest
-import torch
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
@@ -34,7 +33,6 @@ from visualization_msgs.msg import MarkerArray
 
 from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import estimate_view_poses
-from idpose_core.synthetic.scenes import SceneRenderer, demo_objects
 from idpose_ros.estimator_node import RESULT_QOS, EstimatorNode
 from idpose_ros.parameters import current_values, solver_config
 from msg_adapters import array_to_image, compressed_to_rgb, image_to_rgb, pose_to_matrix
@@ -42,26 +40,6 @@ from msg_adapters import array_to_image, compressed_to_rgb, image_to_rgb, pose_t
 TIMEOUT = 60.0
 FAST_SOLVER = dict(azimuth_candidates=2, probe_batch=1, adjust_steps=0, keep_top=1, refine_steps_per_view=2,
                    average_last=1, runner_up_steps=1, image_size=32, min_view_interval=0.0)
-VIEW_SPH_DEG = [(80, 0), (85, 90), (70, 200), (95, 300)]
-
-
-def wait_for(predicate: Callable[[], Any], what: str, timeout: float = TIMEOUT) -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.02)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-
-
-@pytest.fixture(scope="module")
-def renders() -> list[tuple[np.ndarray, np.ndarray]]:
-    """Four 64 px views of a demo object: (RGB on white, alpha)."""
-    torch.set_num_threads(1)  # 2 threads on a busy 2-core machine run ~10x slower
-    with SceneRenderer(demo_objects()[0], image_size=64) as renderer:
-        return [(rgb, (mask * 255).astype(np.uint8))
-                for rgb, mask in (renderer.render(*np.radians(sph), 2.0) for sph in VIEW_SPH_DEG)]
 
 
 def header(frame_id: str, sec: int) -> Header:
@@ -74,9 +52,9 @@ def compressed(rgb: np.ndarray, codec: str, head: Header) -> CompressedImage:
     return CompressedImage(header=head, format=f"rgb8; {codec} compressed bgr8", data=data.tobytes())
 
 
-def mixed_encodings(renders) -> list[Image | CompressedImage]:
+def mixed_encodings(views) -> list[Image | CompressedImage]:
     """The four views as rgba8 (alpha kept, the anchor), bgr8, png and jpeg: the encodings a robot sends."""
-    (rgb0, alpha0), (rgb1, _), (rgb2, _), (rgb3, _) = renders
+    (rgb0, alpha0), (rgb1, _), (rgb2, _), (rgb3, _) = views
     return [
         array_to_image(np.dstack([rgb0, alpha0]), "rgba8", header("anchor_cam", 42)),
         array_to_image(np.ascontiguousarray(rgb1[..., ::-1]), "bgr8", header("cam", 43)),
@@ -88,7 +66,8 @@ def mixed_encodings(renders) -> list[Image | CompressedImage]:
 class Harness:
     """An EstimatorNode and a probe node on one multi-threaded executor spinning in a thread."""
 
-    def __init__(self, context, namespace: str, **overrides: Any) -> None:
+    def __init__(self, context, wait_for: Callable[..., Any], namespace: str, **overrides: Any) -> None:
+        self.wait_for = wait_for
         self.node = EstimatorNode(context=context, namespace=namespace,
                                   parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
         self.probe = Node("probe", namespace=namespace, context=context)
@@ -113,7 +92,7 @@ class Harness:
         self.executor.add_node(self.probe)
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
-        wait_for(lambda: self.images.get_subscription_count() and self.compressed.get_subscription_count(),
+        self.wait_for(lambda: self.images.get_subscription_count() and self.compressed.get_subscription_count(),
                  "the node's image subscriptions")
 
     def _on_log(self, entry: Log) -> None:
@@ -127,7 +106,7 @@ class Harness:
         client = self.clients[service]
         assert client.wait_for_service(TIMEOUT), service
         future = client.call_async(Trigger.Request())
-        return wait_for(future.result, f"the answer of ~/{service}")
+        return self.wait_for(future.result, f"the answer of ~/{service}")
 
     def send(self, msg: Image | CompressedImage) -> None:
         (self.images if isinstance(msg, Image) else self.compressed).publish(msg)
@@ -136,7 +115,7 @@ class Harness:
         """Publish one image and wait until the node has kept it as a view."""
         before = self.node.status().views_buffered
         self.send(msg)
-        wait_for(lambda: self.node.status().views_buffered == before + 1, "the view to be buffered")
+        self.wait_for(lambda: self.node.status().views_buffered == before + 1, "the view to be buffered")
 
     def state(self) -> str:
         return self.node.status().state
@@ -150,13 +129,13 @@ class Harness:
 
 
 @pytest.fixture
-def harness(ros_context, tiny_model_dir, request):
+def harness(ros_context, tiny_model_dir, wait_for, request):
     """A node per test, in a namespace of its own, with the tiny model and the fast solver."""
     made = []
 
     def make(**overrides: Any) -> Harness:
         settings = {"model_path": str(tiny_model_dir), **FAST_SOLVER, **overrides}
-        made.append(Harness(ros_context, f"/{request.node.name.split('[')[0]}_{len(made)}", **settings))
+        made.append(Harness(ros_context, wait_for, f"/{request.node.name.split('[')[0]}_{len(made)}", **settings))
         return made[-1]
 
     yield make
@@ -164,10 +143,10 @@ def harness(ros_context, tiny_model_dir, request):
         h.close()
 
 
-def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harness, renders, tiny_model_dir):
-    h = harness(diagnostics_period=0.1)
+def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harness, object_views, wait_for, tiny_model_dir):
+    h = harness(diagnostics_period=0.1, variant="naive")  # naive: 3 anchor pairs to explore instead of 6
     assert h.call("estimate").message == "need at least 2 buffered views to estimate, have 0"
-    messages = mixed_encodings(renders)
+    messages = mixed_encodings(object_views)
     malformed = [
         Image(header=header("cam", 50), encoding="rgb8", height=64, width=64, step=192, data=b"\x00" * 10),
         Image(header=header("cam", 51), encoding="no_such_encoding", height=2, width=2, step=6, data=b"\x00" * 12),
@@ -215,9 +194,9 @@ def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harnes
     assert h.state() == "idle" and h.node.status().views_buffered == 4, "a finished estimate keeps the views"
 
 
-def test_cancel_and_reset_during_a_run(harness, renders):
+def test_cancel_and_reset_during_a_run(harness, object_views, wait_for):
     h = harness(refine_steps_per_view=1_000_000, average_last=1)
-    for msg in mixed_encodings(renders)[:2]:
+    for msg in mixed_encodings(object_views)[:2]:
         h.send_view(msg)
     assert h.call("cancel").message == "no estimate is running"
 
@@ -240,13 +219,13 @@ def test_cancel_and_reset_during_a_run(harness, renders):
     assert h.poses == [], "a cancelled estimate publishes nothing"
 
 
-def test_on_request_capture_lazy_model_and_automatic_estimate(harness, renders):
+def test_on_request_capture_lazy_model_and_automatic_estimate(harness, object_views, wait_for):
     h = harness(capture_mode="on_request", load_model_at_startup=False, views_per_estimate=2,
                 anchor_frame="object_frame", object_distance=0.5)
     assert h.node.status().model == "not loaded"
     refused = h.call("capture")
     assert not refused.success and refused.message == "no new image received since the last capture"
-    (rgb0, _), (rgb1, _) = renders[:2]
+    (rgb0, _), (rgb1, _) = object_views[:2]
     for rgb, sec in ((rgb0, 10), (rgb1, 11)):
         mono = array_to_image(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY), "mono8", header("cam_optical", sec))
         h.send(mono)
@@ -259,11 +238,11 @@ def test_on_request_capture_lazy_model_and_automatic_estimate(harness, renders):
     assert 0 < distance < 4 * 0.5, "positions are on the object_distance scale"
 
 
-def test_a_missing_model_keeps_the_node_up_and_refuses_estimates(harness, renders, tmp_path):
+def test_a_missing_model_keeps_the_node_up_and_refuses_estimates(harness, object_views, wait_for, tmp_path):
     missing = tmp_path / "zero123-xl"
     h = harness(model_path=str(missing))
     wait_for(lambda: h.state() == "failed", "the model load to fail")
-    for msg in mixed_encodings(renders)[:2]:
+    for msg in mixed_encodings(object_views)[:2]:
         h.send_view(msg)
     refusal = h.call("estimate")
     assert not refusal.success
@@ -275,7 +254,7 @@ def test_a_missing_model_keeps_the_node_up_and_refuses_estimates(harness, render
     assert h.node.status().model.startswith("unavailable")
 
 
-def test_parameters_are_checked_through_the_parameter_service(harness):
+def test_parameters_are_checked_through_the_parameter_service(harness, wait_for):
     h = harness()
     client = AsyncParameterClient(h.probe, "idpose_estimator")
     assert client.wait_for_services(TIMEOUT)

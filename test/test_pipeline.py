@@ -28,7 +28,6 @@ OBJECT_DISTANCE = 0.6  # metres: the published scale, unrelated to the render ra
 @pytest.fixture(scope="module")
 def scene():
     """Three rendered views (RGB on white, alpha from the mask) and the oracle that knows them."""
-    torch.set_num_threads(1)  # 2 threads on a busy 2-core machine run ~10x slower
     spec = demo_objects()[0]
     sph = np.column_stack([np.radians(TRUE_SPH), np.full(len(TRUE_SPH), CAMERA_RADIUS)])
     with SceneRenderer(spec, image_size=96) as renderer:
