@@ -72,7 +72,6 @@ def oracle():
 
 @pytest.fixture(scope="module")
 def oracle_run(demo_bag, oracle):
-    torch.set_num_threads(2)
     bag = read_bag_views(demo_bag, IMAGE_TOPIC)
     estimator = OfflineEstimator(oracle, node_values("fast", None, ORACLE_SOLVER))
     run = plan_evaluation(bag, IMAGE_TOPIC, samples=1, seed=0, view_counts=(2, 4, 8))
