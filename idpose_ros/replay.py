@@ -31,7 +31,8 @@ from idpose_ros.diagnostics import STATUS_NAME
 from idpose_ros.estimator_node import RESULT_QOS, EstimatorNode
 from msg_adapters import pose_to_matrix
 
-SERVICE_TIMEOUT = 10.0  # s to wait for a service, a subscriber or a parameter change
+SERVICE_TIMEOUT = 10.0  # s to wait for a service call, a subscriber or a parameter change
+CONNECT_TIMEOUT = 30.0  # s to wait for the node's services to appear (a node may still be starting)
 CAPTURE_RETRY = 0.05  # s between two ~/capture attempts while the image is on its way
 REPUBLISH_AFTER = 1.0  # s without the node receiving an image before it is published again
 IN_PROCESS_DIAGNOSTICS_PERIOD = 0.2  # s, for a node started here
@@ -94,8 +95,9 @@ class ReplayEstimator:
         self._spinner.start()
         try:
             for name, client in self._services.items():
-                if not client.wait_for_service(timeout_sec=SERVICE_TIMEOUT):
-                    raise ReplayError(f"no estimator node answers {self.node_name}/{name}")
+                if not client.wait_for_service(timeout_sec=CONNECT_TIMEOUT):
+                    raise ReplayError(f"no estimator node answers {self.node_name}/{name} "
+                                      f"(waited {CONNECT_TIMEOUT:g} s; is --node its fully qualified name?)")
             self._wait_until_idle(self.timeout, None)
             self.model = {"node": self.node_name, **self._get_parameters(("model_path", "device", "precision"))}
         except BaseException:
