@@ -47,7 +47,7 @@ def markdown_table(aggregates: dict[str, dict[str, float | int]], method: str) -
 
 
 def plot_cameras(path: Path, true_c2w: np.ndarray, pred_c2w: np.ndarray, views: list[int], title: str) -> None:
-    """True (black) and estimated (red) camera centres and viewing directions around the object."""
+    """True (black) and estimated (red) camera centres and viewing directions around the object, paired by dots."""
     figure = plt.figure(figsize=(6, 6))
     axes = figure.add_subplot(projection="3d")
     radius = float(np.max(np.linalg.norm(true_c2w[:, :3, 3], axis=-1)))
@@ -55,8 +55,9 @@ def plot_cameras(path: Path, true_c2w: np.ndarray, pred_c2w: np.ndarray, views: 
         centres, forward = c2w[:, :3, 3], -c2w[:, :3, 2] * 0.25 * radius  # OpenGL cameras look along -z
         axes.scatter(*centres.T, color=colour, label=label, s=30)
         axes.quiver(*centres.T, *forward.T, color=colour, linewidth=1)
-    for view, centre in zip(views, true_c2w[:, :3, 3]):
-        axes.text(*centre, f" {view}", fontsize=8)
+    for view, true_centre, pred_centre in zip(views, true_c2w[:, :3, 3], pred_c2w[:, :3, 3]):
+        axes.plot(*np.stack([true_centre, pred_centre]).T, color="grey", linestyle=":", linewidth=1)
+        axes.text(*true_centre, f" {view}", fontsize=8)
     axes.scatter([0], [0], [0], color="tab:blue", marker="*", s=120, label="object centre")
     axes.set(xlim=(-radius, radius), ylim=(-radius, radius), zlim=(-radius, radius), xlabel="x", ylabel="y",
              zlabel="z (up)", title=title)
@@ -93,7 +94,8 @@ def write_report(out: Path, args: argparse.Namespace, values: dict[str, Any], mo
     (out / "report.md").write_text(
         f"# Pose evaluation of `{args.bag}`\n\n"
         f"{method}, mode {args.mode}, model {model_name(model)}, solver preset {args.preset}. "
-        f"{args.samples} picks of {report['protocol']['pick_size']} views (seed {args.seed}), "
+        f"{args.samples} pick{'s' if args.samples != 1 else ''} of {report['protocol']['pick_size']} views "
+        f"(seed {args.seed}), "
         f"evaluated on their first {', '.join(map(str, run.view_counts))} views; the first view is the anchor.\n"
         f"Ground truth: {report['ground_truth']}. Views on {args.image_topic}: {len(bag.views)}, "
         f"usable {len(bag.pool)}, skipped {len(bag.skipped)}.\n\n"
