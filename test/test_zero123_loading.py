@@ -111,11 +111,6 @@ def test_missing_folder(tmp_path):
     expect_error(tmp_path / "nowhere", "no such folder or file")
 
 
-def test_empty_model_path():
-    with pytest.raises(ModelLoadError, match="empty"):
-        load_predictor("  ")
-
-
 def test_missing_part(copy):
     shutil.rmtree(copy / "vae")
     shutil.rmtree(copy / "cc_projection")
