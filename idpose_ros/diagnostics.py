@@ -26,12 +26,8 @@ class EstimatorStatus:
 
 
 def level(status: EstimatorStatus) -> bytes:
-    """ERROR when the last job failed, WARN when estimates are impossible for now, OK otherwise."""
-    if status.state == "failed":
-        return DiagnosticStatus.ERROR
-    if status.model.startswith("unavailable"):
-        return DiagnosticStatus.WARN
-    return DiagnosticStatus.OK
+    """ERROR when the last estimate or the model load failed, OK otherwise."""
+    return DiagnosticStatus.ERROR if status.state == "failed" else DiagnosticStatus.OK
 
 
 def summary(status: EstimatorStatus) -> str:

@@ -292,7 +292,8 @@ def run(args: list[str] | None = None) -> int:
     KeyboardInterrupt in the spin loop instead, so the node still logs while it cancels and stops.
     """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGTERM, _interrupt)
+    for signum in (signal.SIGINT, signal.SIGTERM):  # also when started with SIGINT ignored (`node &` in a script)
+        signal.signal(signum, _interrupt)
     try:
         node = EstimatorNode()
     except ParameterException as exc:

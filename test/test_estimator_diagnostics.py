@@ -31,11 +31,12 @@ def test_a_finished_run_reports_time_and_per_view_scores():
     assert "view_3_score" not in kv
 
 
-def test_failures_are_errors_and_a_missing_model_a_warning():
+def test_failures_are_errors():
     failed, kv = values(EstimatorStatus(state="failed", views_buffered=2, max_views=8, model="loaded",
                                         last_error="PreprocessingError: view 1 has no object"))
     assert failed.level == DiagnosticStatus.ERROR and "view 1 has no object" in failed.message
     assert kv["last_error"] == "PreprocessingError: view 1 has no object"
-    idle, _ = values(EstimatorStatus(state="idle", views_buffered=0, max_views=8,
-                                     model="unavailable: no model available: /x does not exist"))
-    assert idle.level == DiagnosticStatus.WARN
+    no_model, kv = values(EstimatorStatus(state="failed", views_buffered=0, max_views=8,
+                                          model="unavailable: no model available: /x does not exist",
+                                          last_error="no model available: /x does not exist"))
+    assert no_model.level == DiagnosticStatus.ERROR and kv["model"].startswith("unavailable: ")
