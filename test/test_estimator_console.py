@@ -2,15 +2,19 @@
 
 The node comes up from install/ (after sourcing install/setup.sh), refuses ~/estimate without
 views, starts an estimate on two views, and a Ctrl-C (SIGINT) in the middle of it ends the
-process cleanly within 2 s. Reduced: the tiny random Zero-1-to-3 on 32 px views, 2 azimuth
-candidates, probe batch 1, no adjustment steps; refinement made endless (10^6 steps) so that
-the SIGINT lands during the run; torch on one thread (test/conftest.py).
+process cleanly within 2 s. The README's walk-through script, run as written, gets the poses from
+it. Reduced: the tiny random Zero-1-to-3 on 32 px views, 2 azimuth candidates, probe batch 1, no
+adjustment steps, 2 refinement and 1 runner-up steps per view (endless refinement, 10^6 steps, where
+the SIGINT must land during the run); torch on one thread (test/conftest.py).
 """
 import os
+import re
 import signal
 import subprocess
 import time
+from pathlib import Path
 
+import cv2
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
@@ -22,23 +26,46 @@ from std_srvs.srv import Trigger
 from idpose_ros.diagnostics import STATUS_NAME
 from msg_adapters import array_to_image
 
+ROOT = Path(__file__).resolve().parents[1]
 NAMESPACE = "/console"
 NODE = f"{NAMESPACE}/idpose_estimator"
 SHUTDOWN_LIMIT = 2.0  # seconds, the issue's requirement for Ctrl-C during an estimate
+FAST = {"image_size": 32, "azimuth_candidates": 2, "probe_batch": 1, "adjust_steps": 0, "keep_top": 1,
+        "refine_steps_per_view": 2, "average_last": 1, "runner_up_steps": 1}
+
+
+def in_workspace(workspace: Path, command: str) -> list[str]:
+    """A bash command line run after sourcing the workspace, as a user's terminal would."""
+    return ["bash", "-c", f". {workspace / 'install' / 'setup.sh'} && exec {command}"]
+
+
+def start_estimator(workspace: Path, namespace: str, parameters: dict, log: Path) -> subprocess.Popen:
+    """The installed `estimator` executable (what `ros2 run idpose_ros estimator` runs), output to ``log``."""
+    executable = workspace / "install" / "idpose_ros" / "lib" / "idpose_ros" / "estimator"
+    arguments = " ".join(f"-p {name}:={value}" for name, value in parameters.items())
+    with log.open("w") as output:
+        return subprocess.Popen(in_workspace(workspace, f"{executable} --ros-args -r __ns:={namespace} {arguments}"),
+                                stdout=output, stderr=subprocess.STDOUT)
+
+
+def stop(process: subprocess.Popen, log: Path) -> float:
+    """SIGINT, then the seconds until the process exited; fails past SHUTDOWN_LIMIT or on a non-zero code."""
+    process.send_signal(signal.SIGINT)
+    interrupted = time.monotonic()
+    try:
+        code = process.wait(timeout=SHUTDOWN_LIMIT)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(f"no exit within {SHUTDOWN_LIMIT} s of SIGINT:\n{log.read_text()}") from None
+    assert code == 0, log.read_text()
+    return time.monotonic() - interrupted
 
 
 def test_the_installed_estimator_refuses_without_views_and_stops_on_ctrl_c_mid_estimate(
         workspace, tiny_model_dir, ros_context, object_views, wait_for, tmp_path):
-    executable = workspace / "install" / "idpose_ros" / "lib" / "idpose_ros" / "estimator"
-    arguments = " ".join(f"-p {name}:={value}" for name, value in {
-        "model_path": tiny_model_dir, "image_size": 32, "min_view_interval": 0.0, "diagnostics_period": 0.1,
-        "azimuth_candidates": 2, "probe_batch": 1, "adjust_steps": 0, "keep_top": 1,
-        "refine_steps_per_view": 1_000_000}.items())
-    command = f". {workspace / 'install' / 'setup.sh'} && exec {executable} --ros-args -r __ns:={NAMESPACE} {arguments}"
     log = tmp_path / "estimator.log"
-    with log.open("w") as output:
-        process = subprocess.Popen(["bash", "-c", command], stdout=output, stderr=subprocess.STDOUT,
-                                   env=os.environ)
+    process = start_estimator(workspace, NAMESPACE, {
+        **FAST, "model_path": tiny_model_dir, "min_view_interval": 0.0, "diagnostics_period": 0.1,
+        "refine_steps_per_view": 1_000_000}, log)
     probe = Node("console_probe", context=ros_context)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(probe)
@@ -76,14 +103,7 @@ def test_the_installed_estimator_refuses_without_views_and_stops_on_ctrl_c_mid_e
         assert call("estimate").success
         spin_until(lambda: status.get("stage") == "refinement", "the estimate to reach refinement")
 
-        process.send_signal(signal.SIGINT)
-        interrupted = time.monotonic()
-        try:
-            code = process.wait(timeout=SHUTDOWN_LIMIT)
-        except subprocess.TimeoutExpired:
-            raise AssertionError(f"no exit within {SHUTDOWN_LIMIT} s of SIGINT:\n{log.read_text()}") from None
-        print(f"estimator exited {time.monotonic() - interrupted:.2f} s after SIGINT")
-        assert code == 0, log.read_text()
+        print(f"estimator exited {stop(process, log):.2f} s after SIGINT")
         assert "shutting down: cancelling the running estimate" in log.read_text()
     finally:
         if process.poll() is None:
@@ -91,3 +111,33 @@ def test_the_installed_estimator_refuses_without_views_and_stops_on_ctrl_c_mid_e
             process.wait()
         executor.shutdown()
         probe.destroy_node()
+
+
+def readme_walk_through_script() -> str:
+    """The Python block of the README's "## Walk-through" section, as a user would copy it."""
+    section = (ROOT / "README.md").read_text().split("\n## Walk-through\n", 1)[1].split("\n## ", 1)[0]
+    (script,) = re.findall(r"```python\n(.*?)```", section, flags=re.DOTALL)
+    return script
+
+
+def test_the_readme_walk_through_script_gets_the_poses(workspace, tiny_model_dir, object_views, tmp_path):
+    views = tmp_path / "views"
+    views.mkdir()
+    for index, (rgb, alpha) in enumerate(object_views[:3]):
+        cv2.imwrite(str(views / f"{index:02d}.png"), np.dstack([cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), alpha]))
+    script = tmp_path / "send_views.py"
+    script.write_text(readme_walk_through_script())
+    log = tmp_path / "estimator.log"
+    process = start_estimator(workspace, "/walkthrough", {
+        **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request"}, log)
+    try:
+        result = subprocess.run(in_workspace(workspace, f"python {script} {views} --ros-args -r __ns:=/walkthrough"),
+                                capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0, result.stderr + log.read_text()
+        lines = result.stdout.splitlines()
+        assert lines[:4] == [f"0{k}.png -> captured view {k + 1} (Image bgra8)" for k in range(3)] + [
+            "estimating the poses of 3 views"]
+        assert lines[4] == "view 0: position (0.000, 0.000, 0.000) m, quaternion (0.000, 0.000, 0.000, 1.000)"
+        assert [line.split(":")[0] for line in lines[5:]] == ["view 1", "view 2"]
+    finally:
+        stop(process, log)
