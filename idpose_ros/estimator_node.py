@@ -154,11 +154,10 @@ class EstimatorNode(Node):
     # ----- services ----------------------------------------------------------------------------------------------
     def _capture(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
-            count = self._buffer.capture_latest(self._now())
+            view, count = self._buffer.capture_latest(self._now())
         except CaptureRefused as exc:
             response.success, response.message = False, str(exc)
             return response
-        view = self._buffer.snapshot()[count - 1]
         self._kept(view, count, node_settings(current_values(self)).views_per_estimate)
         response.success, response.message = True, f"captured view {count} ({view.source})"
         return response
@@ -209,9 +208,11 @@ class EstimatorNode(Node):
         def on_done(outcome: Outcome) -> None:
             self._on_estimated(outcome, views, frame_id, settings.object_distance)
 
-        refusal = self._worker.start("estimate", job, on_done)
+        with self._status_lock:  # held so that a run that ends at once cannot be overwritten by "estimating"
+            refusal = self._worker.start("estimate", job, on_done)
+            if refusal is None:
+                self._state, self._last_error = "estimating", ""
         if refusal is None:
-            self._set_state("estimating")
             self.get_logger().info(f"estimating the poses of {len(views)} views ({config.variant}, "
                                    f"{config.refine_steps_per_view} refinement steps per view)")
         return refusal

@@ -69,14 +69,15 @@ class ViewBuffer:
             self._latest = None  # a later ~/capture must not keep the same image twice
             return count
 
-    def capture_latest(self, now: float) -> int:
-        """`on_request` capture: keep the newest image seen; returns the new number of views."""
+    def capture_latest(self, now: float) -> tuple[View, int]:
+        """`on_request` capture: keep the newest image seen; returns it and the new number of views."""
         with self._lock:
             if self._latest is None:
                 raise CaptureRefused("no new image received since the last capture")
-            count = self._append(self._latest, now)
+            view = self._latest
+            count = self._append(view, now)
             self._latest = None
-            return count
+            return view, count
 
     def snapshot(self) -> list[View]:
         """The kept views in capture order (a copy: the buffer may change while an estimate runs)."""

@@ -37,7 +37,8 @@ def test_on_request_capture_keeps_the_latest_image_once():
         buffer.capture_latest(0.0)
     buffer.observe(view(0))
     buffer.observe(view(1))
-    assert buffer.capture_latest(1.0) == 1
+    kept, count = buffer.capture_latest(1.0)
+    assert (kept.frame_id, count) == ("cam1", 1)
     with pytest.raises(CaptureRefused, match="no new image"):
         buffer.capture_latest(2.0)
     assert [v.frame_id for v in buffer.snapshot()] == ["cam1"]
@@ -49,7 +50,7 @@ def test_an_image_kept_automatically_is_not_captured_again():
     with pytest.raises(CaptureRefused):
         buffer.capture_latest(0.1)
     assert buffer.keep_if_due(view(1), 0.2, 5.0) is None
-    assert buffer.capture_latest(0.3) == 2, "an image skipped by the interval can still be captured"
+    assert buffer.capture_latest(0.3)[1] == 2, "an image skipped by the interval can still be captured"
 
 
 def test_snapshot_is_a_copy_and_clear_drops_everything():
