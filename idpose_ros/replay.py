@@ -36,6 +36,9 @@ CONNECT_TIMEOUT = 30.0  # s to wait for the node's services to appear (a node ma
 CAPTURE_RETRY = 0.05  # s between two ~/capture attempts while the image is on its way
 REPUBLISH_AFTER = 1.0  # s without the node receiving an image before it is published again
 IN_PROCESS_DIAGNOSTICS_PERIOD = 0.2  # s, for a node started here
+# Node parameters a replay sets besides the solver's; a running node gets its own values back on close().
+REPLAY_PARAMETERS = ("anchor_polar_deg", "object_distance", "capture_mode", "views_per_estimate", "max_views",
+                     "anchor_frame")
 
 
 class ReplayError(RuntimeError):
@@ -98,8 +101,11 @@ class ReplayEstimator:
                 if not client.wait_for_service(timeout_sec=CONNECT_TIMEOUT):
                     raise ReplayError(f"no estimator node answers {self.node_name}/{name} "
                                       f"(waited {CONNECT_TIMEOUT:g} s; is --node its fully qualified name?)")
+            if not self._parameters.wait_for_services(timeout_sec=CONNECT_TIMEOUT):
+                raise ReplayError(f"the parameter services of {self.node_name} do not answer")
             self._wait_until_idle(self.timeout, None)
             self.model = {"node": self.node_name, **self._get_parameters(("model_path", "device", "precision"))}
+            self._restore = {} if self._estimator else self._get_parameters([*self.values, *REPLAY_PARAMETERS])
         except BaseException:
             self.close()
             raise
@@ -206,7 +212,12 @@ class ReplayEstimator:
         )
 
     def close(self) -> None:
-        """Stop the node started here (if any), the executor and this ROS context."""
+        """Give a running node its parameters back, or stop the node started here; then leave ROS."""
+        if getattr(self, "_restore", None):
+            try:
+                self._set_parameters(self._restore)
+            except ReplayError as err:
+                self._client.get_logger().warning(f"could not restore the parameters of {self.node_name}: {err}")
         if self._estimator is not None:
             self._estimator.stop()
         self._executor.shutdown(timeout_sec=1.0)

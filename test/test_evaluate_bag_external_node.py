@@ -2,7 +2,7 @@
 
 The node is started as a user starts it (its module's entry point with --ros-args, in a namespace)
 with the tiny random Zero-1-to-3 from ``model_path``; evaluate_bag connects to it by name. The same
-model in offline mode must give the same numbers. Reduced for speed: 32 px views, one 2-view set,
+model in offline mode must give the same numbers, and the node gets its own parameters back. Reduced for speed: 32 px views, one 2-view set,
 2 azimuth candidates, 1 probe sample, no adjustment, 2 refinement steps.
 """
 import json
@@ -13,6 +13,10 @@ import threading
 from pathlib import Path
 
 import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
 
 from idpose_ros import evaluate_bag
 
@@ -41,7 +45,7 @@ def running_node(tiny_model_dir, wait_for):
         process.wait(timeout=30)
 
 
-def test_replay_to_a_running_node_agrees_with_offline(tmp_path, running_node, tiny_model_dir):
+def test_replay_to_a_running_node_agrees_with_offline(tmp_path, running_node, tiny_model_dir, ros_context):
     common = [str(DEMO_BAG), "--samples", "1", "--seed", "2", "--n", "2", "--preset", "fast", "--device", "cpu",
               "--image-size", "32", "--model-path", str(tiny_model_dir)]
     common += [x for item in TINY_SOLVER for x in ("--solver-param", item)]
@@ -57,6 +61,18 @@ def test_replay_to_a_running_node_agrees_with_offline(tmp_path, running_node, ti
     assert a["rot_err_deg"] == pytest.approx(b["rot_err_deg"], abs=1e-6)
     assert a["pos_err"] == pytest.approx(b["pos_err"], abs=1e-9)
     assert a["score"] == pytest.approx(b["score"], rel=1e-5) and a["ambiguous"] == b["ambiguous"]
+    # the node got its own parameters back
+    client_node = rclpy.create_node("parameter_check", context=ros_context)
+    try:
+        client = AsyncParameterClient(client_node, running_node)
+        assert client.wait_for_services(timeout_sec=30)
+        future = client.get_parameters(["capture_mode", "refine_steps_per_view", "image_size"])
+        executor = SingleThreadedExecutor(context=ros_context)
+        executor.add_node(client_node)
+        executor.spin_until_future_complete(future, timeout_sec=30)
+        assert [parameter_value_to_python(v) for v in future.result().values] == ["auto", 600, 256]
+    finally:
+        client_node.destroy_node()
 
 
 def test_a_wrong_node_name_is_a_clear_error(tmp_path, capsys, monkeypatch):
