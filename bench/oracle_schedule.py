@@ -2,13 +2,17 @@
 
 Every scene is solved with: the default schedule with refinement cut to 0 (exploration only), 25, 50,
 100, 200, 400 and 600 (default) steps per view; the default with probe batch 4 and 8 (16 is the
-default); and the ``fast`` preset. Everything else is the paper's schedule (8 x 5 candidates, 10
+default); the default with 5 adjust steps instead of 10, or 3 kept candidates instead of 5; and the
+``fast`` preset. Everything else is the paper's schedule (8 x 5 candidates, 10
 adjust steps, best 5 kept, triangular selection), with the oracle's learning rates
 (``ORACLE_SOLVER_SETTINGS``: adjust 0.2, refine 0.02, because its error is far steeper than
 Zero-1-to-3's). Reduced where it cannot change the poses: runner-up polishing off (it only sets the
 ambiguity flag), 64 px input renders (the oracle answers from its own render grid), one torch thread.
 
-Usage (from the repository root): python -m bench.oracle_schedule [--objects 12] [--scenes 4 2]
+Objects: 6 held-out random blobs with a marker cube and the 6 demo objects (duck, teddy, mug, soccer
+ball, lego, desk; the mug and the ball are round bodies whose only azimuth cue is a small part).
+
+Usage (from the repository root): python -m bench.oracle_schedule [--blobs 6] [--scenes 4 2]
 Writes bench/results/oracle_schedule.json and bench/results/oracle_schedule.png.
 """
 from __future__ import annotations
@@ -28,7 +32,7 @@ from bench.unit_costs import RESULTS  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.solver import SolverConfig  # noqa: E402
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS  # noqa: E402
-from idpose_core.synthetic.scenes import oracle_objects  # noqa: E402
+from idpose_core.synthetic.scenes import demo_objects, oracle_objects  # noqa: E402
 
 REFINE_STEPS = (0, 25, 50, 100, 200, 400, 600)
 PROBE_BATCHES = (4, 8, 16)
@@ -38,13 +42,15 @@ DEFAULT = SolverConfig.preset("default")
 
 
 def sweep_configs() -> dict[str, SolverConfig]:
-    """Named configs: ``steps=S`` (probe batch 16), ``batch=B`` (600 steps) and ``fast``."""
+    """Named configs: ``steps=S`` (probe batch 16), ``batch=B`` (600 steps), two exploration cuts, ``fast``."""
     base = dict(ORACLE_RATES, runner_up_steps=0)
     configs = {f"steps={steps}": SolverConfig.preset("default", **base, refine_steps_per_view=steps)
                for steps in REFINE_STEPS}
     for batch in PROBE_BATCHES:
         if batch != DEFAULT.probe_batch:
             configs[f"batch={batch}"] = SolverConfig.preset("default", **base, probe_batch=batch)
+    configs["adjust=5"] = SolverConfig.preset("default", **base, adjust_steps=5)
+    configs["keep=3"] = SolverConfig.preset("default", **base, keep_top=3)
     configs["fast"] = SolverConfig.preset("fast", **base)
     return configs
 
@@ -68,7 +74,7 @@ def lean_steps(results: dict, count: int, tolerance: float = 0.02) -> int:
 
 def plot(results: dict, objects: int, path) -> None:
     """Accuracy (top) and median rotation error (bottom) vs refinement steps (left) and probe batch (right)."""
-    figure, axes = plt.subplots(2, 2, figsize=(10, 7), sharex="col")
+    figure, axes = plt.subplots(2, 2, figsize=(10, 7), sharex="col", sharey="row")
     sweeps = ((REFINE_STEPS, "steps={}", "refinement steps per view (probe batch 16)"),
               (PROBE_BATCHES, "batch={}", "probe batch (600 refinement steps per view)"))
     for column, (values, name, label) in enumerate(sweeps):
@@ -87,7 +93,7 @@ def plot(results: dict, objects: int, path) -> None:
         axes[1, column].set_yscale("log")
         axes[0, column].legend(fontsize=8, loc="lower right")
         axes[1, column].legend(fontsize=8)
-    figure.suptitle(f"ID-Pose solver on the render oracle ({objects} held-out objects)")
+    figure.suptitle(f"ID-Pose solver on the render oracle ({objects} objects)")
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -95,13 +101,13 @@ def plot(results: dict, objects: int, path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--objects", type=int, default=12, help="held-out oracle objects")
+    parser.add_argument("--blobs", type=int, default=6, help="held-out oracle blobs, besides the 6 demo objects")
     parser.add_argument("--scenes", type=int, nargs=2, default=[4, 2], metavar=("N2", "N4"),
                         help="random scenes per object for n = 2 and n = 4")
     args = parser.parse_args()
     torch.set_num_threads(1)
     configs = sweep_configs()
-    specs = oracle_objects(args.objects)
+    specs = oracle_objects(args.blobs) + demo_objects()
     results, seconds = {}, {}
     for count, scenes in zip(VIEW_COUNTS, args.scenes):
         start = time.perf_counter()

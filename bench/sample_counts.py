@@ -3,7 +3,7 @@
 Ours: ``estimate_poses`` run with the render oracle as a cheap predictor at the full iteration counts
 of each preset; the counts do not depend on the predictor. Official: ``bench/official_counts.py``
 (derived from its published algorithm). With ``bench/results/step_cost.json`` present, both are
-projected to full-size seconds on this CPU (``bench/unit_costs.py``).
+projected to full-size seconds on this CPU (``bench/unit_costs.py``), wall and CPU seconds.
 
 Usage (from the repository root): python -m bench.sample_counts [--views 2 4 6 8] [--presets default fast]
 Writes bench/results/sample_counts.json.
@@ -19,7 +19,7 @@ import torch
 
 from bench.official_counts import OfficialSchedule, official_counts
 from bench.solver_oracle import RENDER_SIZE, scene_cameras
-from bench.unit_costs import RESULTS, UnitCosts
+from bench.unit_costs import MEASURES, RESULTS, UnitCosts
 from idpose_core.solver import SolverConfig, estimate_poses
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOracle
 from idpose_core.synthetic.scenes import oracle_objects
@@ -44,28 +44,30 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     try:
-        costs = UnitCosts.load()
+        costs = {measure: UnitCosts.load(measure=measure) for measure in MEASURES}
     except FileNotFoundError as missing:
-        costs = None
+        costs = {}
         print(f"no projections: {missing}")
 
     rows = []
     for count in args.views:
         official = official_counts(count)
         row = {"n": count, "official": official, "ours": {}}
-        if costs:
-            official["projected_seconds"] = costs.official_seconds(official["probes"], official["steps"])
+        for measure, unit in costs.items():
+            official[f"projected_{measure}"] = unit.official_seconds(official["probes"], official["steps"])
         for preset in args.presets:
             start = time.perf_counter()
             ours = our_counts(count, preset)
-            if costs:
-                ours["projected_seconds"] = costs.ours_seconds(count, ours["forward_samples"], ours["backward_samples"])
+            for measure, unit in costs.items():
+                ours[f"projected_{measure}"] = unit.ours_seconds(count, ours["forward_samples"], ours["backward_samples"])
             row["ours"][preset] = ours
             print(f"n={count} {preset:<8} forward {ours['forward_samples']:>6} backward {ours['backward_samples']:>6}"
-                  + (f"  projected {ours['projected_seconds'] / 60:7.1f} min" if costs else "")
+                  + (f"  projected {ours['projected_seconds'] / 60:7.1f} min wall, "
+                     f"{ours['projected_cpu_seconds'] / 60:7.1f} min CPU" if costs else "")
                   + f"   (oracle run {time.perf_counter() - start:.1f} s)", flush=True)
         print(f"n={count} official forward {official['forward_samples']:>6} backward {official['backward_samples']:>6}"
-              + (f"  projected {official['projected_seconds'] / 60:7.1f} min" if costs else "")
+              + (f"  projected {official['projected_seconds'] / 60:7.1f} min wall, "
+                 f"{official['projected_cpu_seconds'] / 60:7.1f} min CPU" if costs else "")
               + f"   ({official['probes']} probes of {OfficialSchedule().probe_batch}, {official['steps']} steps)",
               flush=True)
         rows.append(row)
@@ -74,7 +76,7 @@ def main() -> None:
         "presets": {preset: SolverConfig.preset(preset).as_dict() for preset in args.presets},
         "oracle_learning_rates": ORACLE_RATES,
         "official_schedule": asdict(OfficialSchedule()),
-        "unit_costs": asdict(costs) if costs else None,
+        "unit_costs": {measure: asdict(unit) for measure, unit in costs.items()} or None,
         "rows": rows,
     }
     RESULTS.mkdir(parents=True, exist_ok=True)

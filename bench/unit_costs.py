@@ -5,7 +5,9 @@ solver batches adjustment steps, so this is an upper bound); every forward-only 
 a measured probe (``ours_probe``, batch 16; the solver batches up to ``max_batch`` = 64); each view
 is encoded once, costed as one official per-step encode (VAE on two images + CLIP on one, so an upper
 bound for one view's VAE + CLIP). Official: probes x ``official_probe`` + steps x ``official_step``.
-Wall-clock medians of the step_cost run are used; model loading is left out on both sides.
+Medians of the step_cost run are used, either wall seconds or process CPU seconds (steadier on a
+shared machine; the encode share is then scaled by the official step's CPU/wall ratio); model
+loading is left out on both sides.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 STEP_COST_FILE = RESULTS / "step_cost.json"
 PROBE_SAMPLES = 16
+MEASURES = ("seconds", "cpu_seconds")
 
 
 @dataclass(frozen=True)
@@ -31,17 +34,23 @@ class UnitCosts:
     threads: int
 
     @classmethod
-    def load(cls, path: Path = STEP_COST_FILE) -> UnitCosts:
-        """Read the medians of a ``bench/step_cost.py`` run; FileNotFoundError names the command."""
+    def load(cls, path: Path = STEP_COST_FILE, measure: str = "seconds") -> UnitCosts:
+        """Medians of a ``bench/step_cost.py`` run in ``measure`` ("seconds" wall or "cpu_seconds").
+
+        Raises FileNotFoundError naming the command that produces the file.
+        """
+        if measure not in MEASURES:
+            raise ValueError(f"measure must be one of {MEASURES}, got {measure!r}")
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path} is missing: run `python bench/step_cost.py` first (~12 GB, minutes)")
         report = json.loads(path.read_text())
         median = report["median"]
-        encode = statistics.median(run["parts"]["encode"] for run in report["runs"]["official_step"])
-        return cls(ours_step=median["ours_step"]["seconds"], ours_probe=median["ours_probe"]["seconds"],
-                   official_step=median["official_step"]["seconds"],
-                   official_probe=median["official_probe"]["seconds"],
+        official_step = median["official_step"]
+        encode_wall = statistics.median(run["parts"]["encode"] for run in report["runs"]["official_step"])
+        encode = encode_wall * official_step[measure] / official_step["seconds"]
+        return cls(ours_step=median["ours_step"][measure], ours_probe=median["ours_probe"][measure],
+                   official_step=official_step[measure], official_probe=median["official_probe"][measure],
                    encode_per_view=encode, threads=int(report["machine"]["threads"]))
 
     def ours_seconds(self, views: int, forward_samples: int, backward_samples: int) -> float:
