@@ -3,7 +3,8 @@
 Ours: ``estimate_poses`` run with the render oracle as a cheap predictor at the full iteration counts
 of each preset; the counts do not depend on the predictor. Official: ``bench/official_counts.py``
 (derived from its published algorithm). With ``bench/results/step_cost.json`` present, both are
-projected to full-size seconds on this CPU (``bench/unit_costs.py``), wall and CPU seconds.
+projected to full-size seconds on this CPU (``bench/unit_costs.py``): wall and CPU seconds of that
+run, and the issue's quiet-machine reference figures (``ISSUE_REFERENCE``).
 
 Usage (from the repository root): python -m bench.sample_counts [--views 2 4 6 8] [--presets default fast]
 Writes bench/results/sample_counts.json.
@@ -19,7 +20,7 @@ import torch
 
 from bench.official_counts import OfficialSchedule, official_counts
 from bench.solver_oracle import RENDER_SIZE, scene_cameras
-from bench.unit_costs import MEASURES, RESULTS, UnitCosts
+from bench.unit_costs import MEASURES, RESULTS, UnitCosts, reference_costs
 from idpose_core.solver import SolverConfig, estimate_poses
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOracle
 from idpose_core.synthetic.scenes import oracle_objects
@@ -45,6 +46,7 @@ def main() -> None:
     torch.set_num_threads(1)
     try:
         costs = {measure: UnitCosts.load(measure=measure) for measure in MEASURES}
+        costs["reference_seconds"] = reference_costs(costs["cpu_seconds"])
     except FileNotFoundError as missing:
         costs = {}
         print(f"no projections: {missing}")
