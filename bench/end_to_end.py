@@ -8,7 +8,7 @@ the model's own ``solver_defaults`` (its timesteps). Rotation errors are reporte
 Without the model weights it writes a "pending" result and exits cleanly.
 
 Usage (from the repository root): python -m bench.end_to_end [--views 2 4] [--presets default fast]
-       [--scenes 3] [--threads 2] [--model-dir FOLDER]
+       [--scenes 3] [--threads 1] [--model-dir FOLDER]
 Writes bench/results/end_to_end.json.
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ def main() -> None:
     parser.add_argument("--views", nargs="+", type=int, default=[2, 4])
     parser.add_argument("--presets", nargs="+", default=["default", "fast"])
     parser.add_argument("--scenes", type=int, default=3, help="scenes per view count (one demo object each)")
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (tiny tensors: 1 is the quickest)")
     parser.add_argument("--model-dir", default="", help="a demo-model folder instead of the embedded one")
     args = parser.parse_args()
     out = RESULTS / "end_to_end.json"
