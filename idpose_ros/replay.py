@@ -19,7 +19,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
 from rclpy.executors import MultiThreadedExecutor
-from rclpy.logging import LoggingSeverity
+from rclpy.logging import LoggingSeverity, set_logger_level
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import qos_profile_sensor_data
@@ -28,7 +28,7 @@ from std_srvs.srv import Trigger
 
 from idpose_core.evaluation import PICK_SIZE, ViewSetEstimate
 from idpose_ros.diagnostics import STATUS_NAME
-from idpose_ros.estimator_node import RESULT_QOS, EstimatorNode
+from idpose_ros.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
 from msg_adapters import pose_to_matrix
 
 SERVICE_TIMEOUT = 10.0  # s to wait for a service call, a subscriber or a parameter change
@@ -69,11 +69,12 @@ class ReplayEstimator:
         self._estimator: EstimatorNode | None = None
         if node_name is None:
             namespace = f"/idpose_evaluate_bag_{os.getpid()}"
+            # warnings and errors only, from its first line on: the terminal belongs to the progress bar
+            set_logger_level(f"{namespace[1:]}.{NODE_NAME}", LoggingSeverity.WARN)
             self._estimator = EstimatorNode(context=self._context, namespace=namespace, parameter_overrides=[
                 Parameter("model_path", value=model_path), Parameter("device", value=device),
                 Parameter("precision", value=precision),
                 Parameter("diagnostics_period", value=IN_PROCESS_DIAGNOSTICS_PERIOD)])
-            self._estimator.get_logger().set_level(LoggingSeverity.WARN)  # keep the terminal to the progress bar
             self._executor.add_node(self._estimator)
             node_name = self._estimator.get_fully_qualified_name()
         self.node_name = node_name.rstrip("/")

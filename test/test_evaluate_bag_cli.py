@@ -1,9 +1,10 @@
 """The evaluate_bag and make_synthetic_bag commands on bad input: a clear message, exit code 2, no traceback.
 
-Every case here fails before a model is loaded, so no model is needed.
+Every case here fails before a model is loaded or fails to load one, so no model is needed.
 """
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from idpose_ros.evaluate_bag import usable_view_counts
 from idpose_ros.make_synthetic_bag import write_rgba_image, write_tf
 
 SECOND = 1_000_000_000
+DEMO_BAG = Path(__file__).resolve().parents[1] / "data" / "demo_bag"
 
 
 @pytest.fixture(scope="module")
@@ -105,3 +107,12 @@ def test_ros2_run_finds_both_commands_and_the_installed_demo_bag(workspace):
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert "topic '/nope' is not in the bag" in result.stderr
     assert "/camera/image_raw [sensor_msgs/msg/Image]" in result.stderr
+
+
+@pytest.mark.parametrize("mode", ["offline", "replay"])
+def test_a_missing_model_is_a_clear_error_in_both_modes(tmp_path, capsys, mode):
+    """Offline loads the model here; replay's node fails to load it and says so through /diagnostics."""
+    code, err = run_main(evaluate_bag.main, [str(DEMO_BAG), "--mode", mode, "--model-path", str(tmp_path / "none"),
+                                             "--out", str(tmp_path / "out")], capsys)
+    assert code == 2 and "no such folder or file" in err and "evaluate_bag: error:" in err
+    assert not (tmp_path / "out").exists()
