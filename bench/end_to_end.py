@@ -18,6 +18,7 @@ import json
 import os
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -31,6 +32,7 @@ from idpose_core.pipeline import estimate_view_poses
 from idpose_core.solver import SolverConfig
 from idpose_core.synthetic.scenes import CAMERA_RADIUS, SceneRenderer, demo_objects, random_camera_spheres
 
+ROOT = Path(__file__).resolve().parents[1]
 IMAGE_SIZE = 256
 SCENE_SEED = 4242  # the demo model's training and accuracy runs use other seeds
 
@@ -62,9 +64,10 @@ def main() -> None:
         predictor = (DemoPredictor.from_pretrained(args.model_dir) if args.model_dir
                      else load_predictor("", device="cpu"))
     except FileNotFoundError as missing:
-        print(f"PENDING: no demo model weights ({missing}); train them with scripts/train_demo_model.py "
-              f"into {EMBEDDED_MODEL_DIR}, then rerun")
-        out.write_text(json.dumps({"status": "pending", "reason": str(missing)}, indent=2) + "\n")
+        folder = args.model_dir or EMBEDDED_MODEL_DIR.relative_to(ROOT)
+        reason = f"no demo model weights in {folder} yet"
+        print(f"PENDING: {reason} ({missing}); train them with scripts/train_demo_model.py, then rerun")
+        out.write_text(json.dumps({"status": "pending", "reason": reason}, indent=2) + "\n")
         return
     load_seconds = time.perf_counter() - start
     overrides = dict(getattr(predictor, "solver_defaults", {}))

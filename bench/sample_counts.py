@@ -87,6 +87,5 @@ def main() -> None:
     print(f"wrote {out}")
 
 
-
 if __name__ == "__main__":
     main()

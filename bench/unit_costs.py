@@ -5,9 +5,9 @@ solver batches adjustment steps, so this is an upper bound); every forward-only 
 a measured probe (``ours_probe``, batch 16; the solver batches up to ``max_batch`` = 64); each view
 is encoded once, costed as one official per-step encode (VAE on two images + CLIP on one, so an upper
 bound for one view's VAE + CLIP). Official: probes x ``official_probe`` + steps x ``official_step``.
-Medians of the step_cost run are used, either wall seconds or process CPU seconds (steadier on a
-shared machine; the encode share is then scaled by the official step's CPU/wall ratio); model
-loading is left out on both sides.
+Medians of the step_cost run are used, either wall seconds or process CPU seconds (these leave out
+time spent waiting for a core but count threads spinning while they wait for each other; the encode
+share is scaled by the official step's CPU/wall ratio); model loading is left out on both sides.
 """
 from __future__ import annotations
 
