@@ -9,7 +9,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=["idpose_core*", "msg_adapters*", "idpose_ros*"]),
-    package_data={"idpose_core": ["assets/*"]},
+    package_data={"idpose_core": ["assets/*", "assets/demo_model/*"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

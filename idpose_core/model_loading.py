@@ -1,12 +1,17 @@
 """One entry point from a user's ``model_path`` to a ready ``NoisePredictor``."""
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import torch
 
+from idpose_core.demo_model import DemoPredictor
+from idpose_core.demo_model import predictor as demo_predictor
+from idpose_core.demo_model.model import WEIGHTS_FILE
 from idpose_core.predictor import NoisePredictor
 from idpose_core.zero123 import ModelLoadError, Zero123Predictor
+from idpose_core.zero123.predictor import resolve_device
 
 PRECISIONS = {"auto": None, "float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth", ".safetensors")
@@ -15,13 +20,25 @@ CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth", ".safetensors")
 def load_predictor(model_path: str, device: str = "auto", precision: str = "auto") -> NoisePredictor:
     """A diffusers-layout Zero-1-to-3 folder or an original LDM checkpoint file -> predictor.
 
+    An empty ``model_path`` loads the embedded demo model (``idpose_core/assets/demo_model``, float32)
+    with a loud warning: it only knows the demo objects; real objects need Zero-1-to-3. Where the
+    package carries no demo weights, an empty path is a ``ModelLoadError``.
+
     ``precision``: "auto" (float32 on CPU, bfloat16/float16 on CUDA), "float32", "float16",
     "bfloat16". Raises ``ModelLoadError`` naming the path, the problem and what to download.
     """
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {sorted(PRECISIONS)}, got {precision!r}")
     if not str(model_path).strip():
-        raise ModelLoadError("model_path", "empty: no model given")
+        folder = demo_predictor.EMBEDDED_MODEL_DIR
+        if not (folder / WEIGHTS_FILE).is_file():
+            raise ModelLoadError("model_path", f"empty, and no embedded demo model is installed ({folder} has no "
+                                 f"{WEIGHTS_FILE}; scripts/train_demo_model.py trains one)")
+        logging.getLogger(__name__).warning(
+            "model_path is empty: using the EMBEDDED DEMO MODEL (%s), a small diffusion model trained only on "
+            "the synthetic demo objects. It is a demonstration: poses of real objects need Zero-1-to-3 weights "
+            "(set model_path).", folder)
+        return DemoPredictor.from_pretrained(folder, resolve_device(device))
     path = Path(model_path).expanduser()
     if path.is_dir():
         return Zero123Predictor.from_pretrained(path, device=device, dtype=PRECISIONS[precision])

@@ -25,6 +25,8 @@ class DemoModelConfig:
     block_out_channels: tuple[int, ...] = (32, 64, 128)
     layers_per_block: int = 1
     attention_heads: int = 4
+    resnet_time_scale_shift: str = "default"
+    token_in_timestep_embedding: bool = False
     norm_num_groups: int = 8
     embedding_dim: int = 128
     encoder_patch_size: int = 4
@@ -43,6 +45,8 @@ class DemoModelConfig:
             raise ValueError(f"encoder_patch_size {self.encoder_patch_size} must divide resolution {self.resolution}")
         if any(c % self.norm_num_groups for c in self.block_out_channels):
             raise ValueError(f"norm_num_groups {self.norm_num_groups} must divide every block_out_channels entry")
+        if self.resnet_time_scale_shift not in ("default", "scale_shift"):
+            raise ValueError(f"resnet_time_scale_shift must be 'default' or 'scale_shift', got {self.resnet_time_scale_shift!r}")
         if self.embedding_dim % self.encoder_heads:
             raise ValueError(f"encoder_heads {self.encoder_heads} must divide embedding_dim {self.embedding_dim}")
         return self
@@ -61,9 +65,15 @@ class DemoModelConfig:
             cross_attention_dim=self.embedding_dim,
             attention_head_dim=self.attention_heads,
             norm_num_groups=self.norm_num_groups,
+            resnet_time_scale_shift=self.resnet_time_scale_shift,
             class_embed_type="projection",
-            projection_class_embeddings_input_dim=FOURIER_DIM,
+            projection_class_embeddings_input_dim=self.class_embedding_dim,
         )
+
+    @property
+    def class_embedding_dim(self) -> int:
+        """Input size of the UNet's projection class embedding: pose Fourier features (+ the cc_projection token)."""
+        return FOURIER_DIM + (self.embedding_dim if self.token_in_timestep_embedding else 0)
 
     def encoder_config(self) -> CLIPVisionConfig:
         """A tiny transformers CLIP vision tower (trained from scratch) on ``resolution``-pixel images."""

@@ -3,7 +3,8 @@
 Parts (same classes as Zero-1-to-3): a diffusers ``UNet2DConditionModel`` noise predictor, a
 transformers ``CLIPVisionModelWithProjection`` reference encoder, and ``cc_projection`` (Linear
 embedding + 4 -> embedding) producing the single cross-attention token. Deviation: the pose's
-Fourier features also enter the timestep embedding through the UNet's projection class embedding.
+Fourier features (optionally with the cc_projection token) also enter the timestep embedding through
+the UNet's projection class embedding, and optionally scale and shift every ResNet block (FiLM).
 """
 from __future__ import annotations
 
@@ -59,8 +60,11 @@ class DemoDiffusionModel(nn.Module):
         """Predicted noise (B, 3, r, r) from noisy targets, reference images (B, 3, r, r), reference
         embeddings (B, D), relative poses (B, 3) and steps t (B,)."""
         token = self.cc_projection(torch.cat([embedding, pose_features(pose).to(embedding.dtype)], -1))
+        class_input = fourier_pose_features(pose).to(noisy.dtype)
+        if self.config.token_in_timestep_embedding:
+            class_input = torch.cat([class_input, token], -1)
         return self.unet(torch.cat([noisy, reference], 1), t, encoder_hidden_states=token[:, None],
-                         class_labels=fourier_pose_features(pose).to(noisy.dtype)).sample
+                         class_labels=class_input).sample
 
     def save_pretrained(self, folder: Path) -> None:
         """Write ``config.json`` and ``model.safetensors`` into ``folder``."""

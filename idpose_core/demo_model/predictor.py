@@ -22,6 +22,7 @@ class DemoPredictor:
     """
 
     def __init__(self, model: DemoDiffusionModel, solver_defaults: dict | None = None):
+        """``solver_defaults``: ``SolverConfig`` overrides recommended for this model (its probe timesteps)."""
         self.model = model.eval().requires_grad_(False)
         self.num_train_timesteps = int(model.config.num_train_timesteps)
         self.solver_defaults = dict(solver_defaults or {})
@@ -32,6 +33,7 @@ class DemoPredictor:
         folder = Path(folder)
         defaults_path = folder / SOLVER_DEFAULTS_FILE
         defaults = json.loads(defaults_path.read_text()) if defaults_path.is_file() else {}
+        defaults = {key: tuple(value) if isinstance(value, list) else value for key, value in defaults.items()}
         return cls(DemoDiffusionModel.from_pretrained(folder).to(device), defaults)
 
     @classmethod
