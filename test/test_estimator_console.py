@@ -11,6 +11,7 @@ import os
 import re
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -131,7 +132,7 @@ def test_the_readme_walk_through_script_gets_the_poses(workspace, tiny_model_dir
     process = start_estimator(workspace, "/walkthrough", {
         **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request"}, log)
     try:
-        result = subprocess.run(in_workspace(workspace, f"python {script} {views} --ros-args -r __ns:=/walkthrough"),
+        result = subprocess.run(in_workspace(workspace, f"{sys.executable} {script} {views} --ros-args -r __ns:=/walkthrough"),
                                 capture_output=True, text=True, timeout=120)
         assert result.returncode == 0, result.stderr + log.read_text()
         lines = result.stdout.splitlines()
