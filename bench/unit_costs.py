@@ -2,7 +2,7 @@
 
 Ours: every differentiated sample costs one measured refinement step (``ours_step``, batch 1 - the
 solver batches adjustment steps, so this is an upper bound); every forward-only sample costs 1/16 of
-a measured probe (``ours_probe``, batch 16; the solver batches up to ``max_batch`` = 64); each view
+a measured probe (``ours_probe``, batch 16, as the Zero-1-to-3 predictor runs per UNet call); each view
 is encoded once, costed as one official per-step encode (VAE on two images + CLIP on one, so an upper
 bound for one view's VAE + CLIP). Official: probes x ``official_probe`` + steps x ``official_step``.
 Medians of the step_cost run are used, either wall seconds or process CPU seconds (these leave out
