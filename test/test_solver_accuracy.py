@@ -26,14 +26,6 @@ PAIRS = SolverConfig(**ORACLE_SOLVER_SETTINGS, refine_steps_per_view=100, runner
 SETS = SolverConfig(**ORACLE_SOLVER_SETTINGS, refine_steps_per_view=40, runner_up_steps=0)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny tensors: one thread avoids thread hand-over costs on the shared CPU."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
 
 def solve(spec: ObjectSpec, count: int, seed: int, config: SolverConfig) -> tuple[np.ndarray, SolverResult]:
     """Rotation errors (count-1,) in degrees and the result, for ``count`` random views of ``spec``."""

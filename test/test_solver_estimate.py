@@ -38,14 +38,6 @@ class CountingPredictor:
         return self.oracle.noise_error(views, ref, tgt, pose, t, noise)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny tensors: one thread avoids thread hand-over costs on the shared CPU."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
 
 def scene(count: int) -> CountingPredictor:
     views = random_camera_spheres(np.random.default_rng(7), count)
