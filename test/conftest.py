@@ -103,3 +103,19 @@ def object_views() -> list[tuple[Any, Any]]:
         return [(rgb, (mask * 255).astype(np.uint8))
                 for rgb, mask in (renderer.render(np.radians(polar), np.radians(azimuth), 2.0)
                                   for polar, azimuth in ((80, 0), (85, 90), (70, 200), (95, 300)))]
+
+
+@pytest.fixture(scope="session")
+def errors_of() -> Callable[[Any], Any]:
+    """noise_error of a predictor on fixed inputs: equal outputs mean equal weights and conditioning."""
+    import torch
+
+    def errors(predictor):
+        generator = torch.Generator().manual_seed(0)
+        views = predictor.encode(torch.rand(2, 3, 32, 32, generator=generator) * 2 - 1)
+        noise = torch.randn(2, *views.noise_shape, generator=generator)
+        pose = torch.tensor([[0.3, 1.0, 0.1], [-0.2, 4.0, 0.0]])
+        return predictor.noise_error(views, torch.tensor([0, 1]), torch.tensor([1, 0]), pose,
+                                     torch.tensor([200, 205]), noise)
+
+    return errors

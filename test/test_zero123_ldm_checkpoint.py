@@ -133,14 +133,6 @@ def checkpoint(source, tmp_path_factory):
     return file
 
 
-def errors_of(predictor):
-    generator = torch.Generator().manual_seed(0)
-    views = predictor.encode(torch.rand(2, 3, 32, 32, generator=generator) * 2 - 1)
-    noise = torch.randn(2, *views.noise_shape, generator=generator)
-    pose = torch.tensor([[0.3, 1.0, 0.1], [-0.2, 4.0, 0.0]])
-    return predictor.noise_error(views, torch.tensor([0, 1]), torch.tensor([1, 0]), pose, torch.tensor([200, 205]), noise)
-
-
 def assert_same_weights(loaded, source):
     for name in ("unet", "vae", "image_encoder", "cc_projection"):
         got, expected = (getattr(p.modules, name).state_dict() for p in (loaded, source))
@@ -159,13 +151,13 @@ def test_uses_the_original_key_names(checkpoint):
         assert expected in keys
 
 
-def test_checkpoint_loads_into_identical_modules(source, checkpoint):
+def test_checkpoint_loads_into_identical_modules(source, checkpoint, errors_of):
     loaded = Zero123Predictor.from_ldm_checkpoint(checkpoint, device="cpu", config=Zero123Config.tiny())
     assert_same_weights(loaded, source)
     torch.testing.assert_close(errors_of(loaded), errors_of(source), rtol=0, atol=0)
 
 
-def test_bare_state_dict_in_safetensors(source, tmp_path):
+def test_bare_state_dict_in_safetensors(source, tmp_path, errors_of):
     from safetensors.torch import save_file
 
     file = tmp_path / "zero123-tiny.safetensors"

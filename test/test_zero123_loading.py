@@ -35,15 +35,6 @@ def copy(saved, tmp_path):
     return shutil.copytree(saved, tmp_path / "model")
 
 
-def errors_of(predictor):
-    """noise_error on fixed inputs: equal outputs mean equal weights and conditioning."""
-    generator = torch.Generator().manual_seed(0)
-    views = predictor.encode(torch.rand(2, 3, 32, 32, generator=generator) * 2 - 1)
-    noise = torch.randn(2, *views.noise_shape, generator=generator)
-    pose = torch.tensor([[0.3, 1.0, 0.1], [-0.2, 4.0, 0.0]])
-    return predictor.noise_error(views, torch.tensor([0, 1]), torch.tensor([1, 0]), pose, torch.tensor([200, 205]), noise)
-
-
 def test_layout_on_disk(saved):
     expected = {"unet", "vae", "image_encoder", "cc_projection", "feature_extractor", "scheduler", "model_index.json"}
     assert expected <= {p.name for p in saved.iterdir()}
@@ -53,25 +44,25 @@ def test_layout_on_disk(saved):
         "projection.weight", "projection.bias"}
 
 
-def test_round_trip_gives_identical_outputs(source, saved):
+def test_round_trip_gives_identical_outputs(source, saved, errors_of):
     loaded = Zero123Predictor.from_pretrained(saved, device="cpu")
     torch.testing.assert_close(errors_of(loaded), errors_of(source), rtol=0, atol=0)
     assert loaded.modules.scheduler.config.beta_schedule == "scaled_linear"
 
 
-def test_load_predictor_dispatches_a_folder(source, saved):
+def test_load_predictor_dispatches_a_folder(source, saved, errors_of):
     predictor = load_predictor(str(saved), device="cpu", precision="float32")
     assert isinstance(predictor, Zero123Predictor) and predictor.dtype == torch.float32
     torch.testing.assert_close(errors_of(predictor), errors_of(source), rtol=0, atol=0)
 
 
-def test_bfloat16_precision_runs_close_to_float32(source, saved):
+def test_bfloat16_precision_runs_close_to_float32(source, saved, errors_of):
     predictor = load_predictor(str(saved), device="cpu", precision="bfloat16")
     assert predictor.modules.unet.dtype == torch.bfloat16 and predictor.modules.vae.dtype == torch.float32
     torch.testing.assert_close(errors_of(predictor), errors_of(source), rtol=0.1, atol=0.05)
 
 
-def test_clip_camera_projection_layout_loads(source, copy):
+def test_clip_camera_projection_layout_loads(source, copy, errors_of):
     """The bennyguo/ashawkey conversions name the projection folder and its Linear differently."""
     weights = load_file(copy / "cc_projection" / "diffusion_pytorch_model.safetensors")
     shutil.rmtree(copy / "cc_projection")
@@ -83,7 +74,7 @@ def test_clip_camera_projection_layout_loads(source, copy):
     torch.testing.assert_close(errors_of(Zero123Predictor.from_pretrained(copy)), errors_of(source), rtol=0, atol=0)
 
 
-def test_projection_in_a_weights_only_pickle_loads(source, copy):
+def test_projection_in_a_weights_only_pickle_loads(source, copy, errors_of):
     """Older conversions ship diffusion_pytorch_model.bin; it is read with weights_only=True."""
     file = copy / "cc_projection" / "diffusion_pytorch_model.safetensors"
     torch.save(load_file(file), copy / "cc_projection" / "diffusion_pytorch_model.bin")
