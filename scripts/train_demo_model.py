@@ -29,15 +29,16 @@ from diffusers.training_utils import EMAModel
 from tqdm import tqdm
 
 from idpose_core.demo_model import EMBEDDED_MODEL_DIR, DemoDiffusionModel, DemoModelConfig, DemoPredictor
-from idpose_core.demo_model.grid_check import grid_search, pose_grid, random_pose_errors, rotation_errors
+from idpose_core.cameras import spherical_to_c2w
+from idpose_core.demo_model.grid_check import grid_search, pose_grid, rotation_errors
 from idpose_core.demo_model.training_data import (PairBatch, PairPool, RenderedViews, cached_views, make_pairs,
                                                   random_pairs)
+from idpose_core.metrics import random_pose_errors
 from idpose_core.synthetic.scenes import demo_objects
 
-GAP_TIMESTEPS = (200, 350, 500, 650)
+GAP_TIMESTEPS = (300, 500, 700, 850)
 CHECK_AZIMUTHS = 12
 CHECK_POLARS_DEG = (-45.0, 0.0, 45.0)
-POSE_PATH = ("class_embedding", "time_emb_proj", "cc_projection")
 
 
 def parse_args() -> argparse.Namespace:
@@ -52,8 +53,8 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--lr", type=float, default=8e-4)
     parser.add_argument("--ema-decay", type=float, default=0.998)
-    parser.add_argument("--t-min", type=int, default=100, help="smallest training timestep")
-    parser.add_argument("--t-max", type=int, default=800, help="largest training timestep")
+    parser.add_argument("--t-min", type=int, default=400, help="smallest training timestep")
+    parser.add_argument("--t-max", type=int, default=950, help="largest training timestep")
     parser.add_argument("--train-views", type=int, default=600, help="training cameras per object")
     parser.add_argument("--heldout-views", type=int, default=60, help="held-out cameras per object")
     parser.add_argument("--image-size", type=int, default=128, help="render size before preprocessing")
@@ -67,20 +68,14 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--checkpoint-every-minutes", type=float, default=3.0)
     parser.add_argument("--block-out-channels", type=int, nargs="+", default=[32, 64, 128])
     parser.add_argument("--layers-per-block", type=int, default=1)
+    parser.add_argument("--view-weight", type=float, default=1.0,
+                        help="weight of the reference-view regression loss (absolute view conditioning)")
+    parser.add_argument("--prediction-type", choices=("epsilon", "sample"), default="sample",
+                        help="what the UNet outputs: noise, or the clean target (a view-synthesis loss)")
     parser.add_argument("--film", action=argparse.BooleanOptionalAction, default=True,
                         help="timestep+pose embedding scales and shifts every ResNet block (FiLM)")
     parser.add_argument("--token-in-timestep", action=argparse.BooleanOptionalAction, default=True,
                         help="the cc_projection token (reference embedding + pose) also enters the timestep embedding")
-    parser.add_argument("--rank-weight", type=float, default=0.1,
-                        help="weight of the pose-ranking term (0: plain denoising loss)")
-    parser.add_argument("--rank-margin", type=float, default=0.3,
-                        help="relative noise-error margin a wrong pose must exceed the true pose by")
-    parser.add_argument("--rank-pairs", type=int, default=16, help="pairs per batch that also get a wrong pose")
-    parser.add_argument("--init-from", type=Path, default=None,
-                        help="start from this checkpoint's model weights (a non-FiLM one may seed a --film model)")
-    parser.add_argument("--pose-lr-scale", type=float, default=10.0,
-                        help="learning-rate factor of the pose path (class embedding, time_emb_proj, cc_projection)")
-    parser.add_argument("--rank-start-step", type=int, default=0, help="step from which the ranking term is on")
     return parser.parse_args()
 
 
@@ -140,65 +135,26 @@ def ema_predictor(model: DemoDiffusionModel, ema: EMAModel, config: DemoModelCon
     return DemoPredictor(copy)
 
 
-def wrong_poses(pose: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
-    """Perturbed poses (B, 3): mostly a different azimuth (20..340 deg off) with some polar change,
-    otherwise the same azimuth and a polar 15..50 deg off; the radius stays."""
-    count = len(pose)
-    azimuth_off = rng.uniform(math.radians(20), math.radians(340), count)
-    polar_off = rng.uniform(-math.radians(40), math.radians(40), count)
-    polar_only = rng.random(count) < 0.3
-    azimuth_off[polar_only] = 0.0
-    polar_off[polar_only] = rng.choice([-1.0, 1.0], polar_only.sum()) * rng.uniform(
-        math.radians(15), math.radians(50), polar_only.sum())
-    wrong = pose.clone()
-    wrong[:, 0] += torch.as_tensor(polar_off, dtype=pose.dtype)
-    wrong[:, 1] = torch.remainder(wrong[:, 1] + torch.as_tensor(azimuth_off, dtype=pose.dtype), 2 * math.pi)
-    return wrong
-
-
 def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: torch.Tensor, pose: torch.Tensor,
-                  t: torch.Tensor, rng: np.random.Generator, rank_pairs: int, rank_weight: float,
-                  rank_margin: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """(total loss, denoising loss). Denoising: noise MSE at the true pose. Ranking (this model's
-    deviation from Zero-1-to-3's objective): the first ``rank_pairs`` samples are also denoised under a
-    wrong pose with the same noise, and a hinge asks their error to exceed the true pose's by
-    ``rank_margin`` (relative); it switches itself off once the margin holds."""
+                  reference_view: torch.Tensor, t: torch.Tensor, view_weight: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """(total loss, denoising loss). Denoising: MSE of the UNet's output (noise or clean target, as the
+    config's ``prediction_type`` says) at the true pose. With absolute view conditioning, plus
+    ``view_weight`` x the MSE of the view head's (polar - pi/2, sin azimuth, cos azimuth) of the reference."""
     noise = torch.randn_like(target)
     noisy = model.add_noise(target, noise, t)
+    wanted = target if model.config.prediction_type == "sample" else noise
     embedding = model.embed(reference)
-    k = rank_pairs if rank_weight > 0 else 0
-    predicted = model.predict_noise(torch.cat([noisy, noisy[:k]]), torch.cat([reference, reference[:k]]),
-                                    torch.cat([embedding, embedding[:k]]),
-                                    torch.cat([pose, wrong_poses(pose[:k], rng)]), torch.cat([t, t[:k]]))
-    errors = (predicted - torch.cat([noise, noise[:k]])).pow(2).flatten(1).mean(1)
-    true_errors, wrong_errors = errors[:len(pose)], errors[len(pose):]
-    denoising = true_errors.mean()
-    if k == 0:
+    denoising = (model.model_output(noisy, reference, embedding, pose, t) - wanted).pow(2).mean()
+    if model.view_head is None:
         return denoising, denoising
-    gap = (wrong_errors - true_errors[:k]) / true_errors[:k].detach().clamp_min(1e-4)
-    return denoising + rank_weight * torch.relu(rank_margin - gap).mean(), denoising
+    polar, azimuth = reference_view[:, 0], reference_view[:, 1]
+    wanted_view = torch.stack([polar - math.pi / 2, torch.sin(azimuth), torch.cos(azimuth)], -1)
+    return denoising + view_weight * (model.view_head_output(embedding) - wanted_view).pow(2).mean(), denoising
 
-
-def initial_weights(path: Path, model: DemoDiffusionModel) -> tuple[int, float]:
-    """Load a checkpoint's model weights into ``model``; returns its (step, elapsed seconds).
-
-    A checkpoint without FiLM seeds a FiLM model: each ResNet's ``time_emb_proj`` (C -> 2C) gets zero
-    scale rows and the old additive projection as its shift rows; new class-embedding inputs (the
-    token) get zero weights; every other tensor is copied.
-    """
-    state = torch.load(path, weights_only=True)
-    weights = model.state_dict()
-    for name, tensor in state["model"].items():
-        if weights[name].shape == tensor.shape:
-            weights[name] = tensor
-        elif "time_emb_proj" in name and weights[name].shape[0] == 2 * tensor.shape[0]:
-            weights[name] = torch.cat([torch.zeros_like(tensor), tensor])
-        elif name == "unet.class_embedding.linear_1.weight" and weights[name].shape[0] == tensor.shape[0]:
-            weights[name] = torch.cat([tensor, torch.zeros(tensor.shape[0], weights[name].shape[1] - tensor.shape[1])], 1)
-        else:
-            raise ValueError(f"{path}: {name} has shape {tuple(tensor.shape)}, the model needs {tuple(weights[name].shape)}")
-    model.load_state_dict(weights)
-    return int(state["step"]), float(state["elapsed"])
+def learning_rate_factor(step: int, progress: float) -> float:
+    """Linear warm-up over 200 steps, then a cosine decay to a tenth over the wall-time budget."""
+    cosine = 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
+    return min(1.0, (step + 1) / 200) * (0.1 + 0.9 * cosine)
 
 
 def main() -> None:
@@ -208,39 +164,29 @@ def main() -> None:
     args.work_dir.mkdir(parents=True, exist_ok=True)
     config = DemoModelConfig(block_out_channels=tuple(args.block_out_channels), layers_per_block=args.layers_per_block,
                              resnet_time_scale_shift="scale_shift" if args.film else "default",
-                             token_in_timestep_embedding=args.token_in_timestep)
+                             token_in_timestep_embedding=args.token_in_timestep,
+                             prediction_type=args.prediction_type)
     model = DemoDiffusionModel(config)
-    pose_path = [p for n, p in model.named_parameters() if any(k in n for k in POSE_PATH)]
-    rest = [p for n, p in model.named_parameters() if not any(k in n for k in POSE_PATH)]
-    optimizer = torch.optim.AdamW([{"params": rest, "scale": 1.0}, {"params": pose_path, "scale": args.pose_lr_scale}],
-                                  lr=args.lr, weight_decay=1e-4)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     ema = EMAModel(model.parameters(), decay=args.ema_decay)
     checkpoint_path = args.work_dir / "checkpoint.pt"
     step, elapsed, history = 0, 0.0, []
     if checkpoint_path.is_file():
         state = torch.load(checkpoint_path, weights_only=True)
         model.load_state_dict(state["model"])
-        try:
-            optimizer.load_state_dict(state["optimizer"])
-        except ValueError as error:  # a checkpoint from before the pose-path parameter group
-            print(f"optimizer state not resumed ({error}); starting it afresh")
+        optimizer.load_state_dict(state["optimizer"])
         ema.load_state_dict(state["ema"])
         step, elapsed = int(state["step"]), float(state["elapsed"])
         history = json.loads(state.get("history", "[]"))
         print(f"resumed from {checkpoint_path} at step {step} ({elapsed / 60:.1f} min)")
-    elif args.init_from is not None:
-        step, elapsed = initial_weights(args.init_from, model)
-        ema = EMAModel(model.parameters(), decay=args.ema_decay)
-        history = [{"from_step": step, "initialised_from": str(args.init_from)}]
-        print(f"initialised from {args.init_from} (step {step}, {elapsed / 60:.1f} min)")
 
     history.append({"from_step": step, "arguments": {k: str(v) if isinstance(v, Path) else v
                                                      for k, v in vars(args).items()}})
     train, heldout = load_data(args)
     gap_pairs = fixed_pairs(heldout, args.gap_pairs, args.seed + 1, model)
     check_pairs = fixed_pairs(heldout, args.check_pairs, args.seed + 2, model)
-    baseline = random_pose_errors(*true_cameras(check_pairs, heldout), np.random.default_rng(args.seed),
-                                  CHECK_POLARS_DEG)
+    baseline, _ = random_pose_errors(*map(spherical_to_c2w, true_cameras(check_pairs, heldout)), 200,
+                                     np.random.default_rng(args.seed))
     print(f"random-pose baseline on the check pairs: RotAcc@15 {np.mean(baseline < 15):.0%}, "
           f"@30 {np.mean(baseline < 30):.0%}")
     curve_path = args.work_dir / "curve.csv"
@@ -266,16 +212,14 @@ def main() -> None:
         if elapsed >= budget or (args.max_steps and step >= args.max_steps):
             break
         rng = np.random.default_rng([args.seed, step])
-        reference, target, pose = pool.draw(rng, args.batch)
+        reference, target, pose, reference_view = pool.draw(rng, args.batch)
         t = torch.as_tensor(rng.integers(args.t_min, args.t_max + 1, size=args.batch))
-        rank_weight = args.rank_weight if step >= args.rank_start_step else 0.0
-        loss, denoising = training_loss(model, reference, target, pose, t, rng, args.rank_pairs, rank_weight,
-                                        args.rank_margin)
+        loss, denoising = training_loss(model, reference, target, pose, reference_view, t, args.view_weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
         for group in optimizer.param_groups:
-            group["lr"] = args.lr * group["scale"] * min(1.0, (step + 1) / 200)
+            group["lr"] = args.lr * learning_rate_factor(step, elapsed / budget)
         optimizer.step()
         ema.step(model.parameters())
         step += 1

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import json
+import math
+from dataclasses import replace
 
 import pytest
 import torch
@@ -85,3 +87,34 @@ def test_config_rejects_unknown_keys_and_bad_sizes(tmp_path):
         DemoModelConfig.load(tmp_path / CONFIG_FILE)
     with pytest.raises(ValueError, match="resolution"):
         DemoModelConfig(resolution=30).validate()
+    with pytest.raises(ValueError, match="prediction_type must be 'epsilon' or 'sample', got 'v_prediction'"):
+        DemoModelConfig(prediction_type="v_prediction").validate()
+
+
+def test_a_clean_target_prediction_becomes_the_exact_noise(monkeypatch):
+    """prediction_type "sample": predict_noise turns the UNet's clean-target output into noise, so a
+    perfect view synthesis has zero noise error at every step."""
+    model = DemoDiffusionModel(TINY)
+    assert model.config.prediction_type == "sample"
+    clean, noise = images(3, size=16, seed=3), torch.randn(3, 3, 16, 16)
+    t = torch.tensor([100, 500, 950])
+    noisy = model.add_noise(clean, noise, t)
+    monkeypatch.setattr(model, "model_output", lambda *args: clean)
+    predicted = model.predict_noise(noisy, clean, torch.zeros(3, 16), torch.zeros(3, 3), t)
+    torch.testing.assert_close(predicted, noise, rtol=1e-4, atol=1e-4)
+
+
+def test_view_head_reads_the_absolute_reference_view():
+    """The head's (polar - pi/2, sin az, cos az) becomes (polar, azimuth, 0); composing a relative pose onto it
+    is what the UNet's pose features describe."""
+    model = DemoDiffusionModel(TINY)
+    polar, azimuth = 1.2, 2.5
+    with torch.no_grad():
+        model.view_head.weight.zero_()
+        model.view_head.bias.copy_(torch.tensor([polar - torch.pi / 2, math.sin(azimuth), math.cos(azimuth)]))
+    view = model.reference_view(torch.randn(2, TINY.embedding_dim))
+    torch.testing.assert_close(view, torch.tensor([[polar, azimuth, 0.0]] * 2))
+    without = DemoDiffusionModel(replace(TINY, absolute_view_conditioning=False))
+    assert without.view_head is None
+    with pytest.raises(ValueError, match="no view head"):
+        without.reference_view(torch.randn(1, TINY.embedding_dim))

@@ -19,6 +19,13 @@ class DemoModelConfig:
     Pixel space (no VAE): the UNet denoises ``resolution``-pixel RGB images; its input is the noisy
     target (3 channels) concatenated with the reference image (3), as Zero-1-to-3 concatenates the
     reference latent. The schedule is Zero-1-to-3's (1000 steps, ``scaled_linear`` betas).
+    ``prediction_type`` is what the UNet outputs: ``"epsilon"`` (Zero-1-to-3's noise) or ``"sample"``
+    (the clean target, converted to noise for the solver), a deviation that makes the training loss at
+    high noise levels a view-synthesis error, the signal the pose inversion needs.
+    ``absolute_view_conditioning``: a second deviation. A linear head on the reference embedding
+    regresses the reference's absolute view (trained on the renders' cameras), the relative pose is
+    composed onto it, and the pose features the UNet's class embedding sees are those of the absolute
+    target view, so the UNet learns "object x from view v" instead of the harder "view v from view u".
     """
 
     resolution: int = 32
@@ -36,6 +43,8 @@ class DemoModelConfig:
     beta_start: float = 0.00085
     beta_end: float = 0.012
     beta_schedule: str = "scaled_linear"
+    prediction_type: str = "sample"
+    absolute_view_conditioning: bool = True
 
     def validate(self) -> DemoModelConfig:
         """Raise ValueError naming the first inconsistent field; return self."""
@@ -49,6 +58,8 @@ class DemoModelConfig:
             raise ValueError(f"resnet_time_scale_shift must be 'default' or 'scale_shift', got {self.resnet_time_scale_shift!r}")
         if self.embedding_dim % self.encoder_heads:
             raise ValueError(f"encoder_heads {self.encoder_heads} must divide embedding_dim {self.embedding_dim}")
+        if self.prediction_type not in ("epsilon", "sample"):
+            raise ValueError(f"prediction_type must be 'epsilon' or 'sample', got {self.prediction_type!r}")
         return self
 
     def unet_kwargs(self) -> dict:

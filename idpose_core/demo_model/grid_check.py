@@ -58,12 +58,3 @@ def rotation_errors(pred_rel: np.ndarray, reference_sph: np.ndarray, target_sph:
     """Rotation errors (P,) in degrees of predicted relative poses (P, 3) given the true cameras (P, 3)."""
     rot_err, _ = pair_errors(pred_rel, spherical_to_c2w(reference_sph), spherical_to_c2w(target_sph))
     return rot_err
-
-
-def random_pose_errors(reference_sph: np.ndarray, target_sph: np.ndarray, rng: np.random.Generator,
-                       polar_offsets_deg: tuple[float, ...]) -> np.ndarray:
-    """Rotation errors (P,) of the random baseline: a uniform azimuth and a random grid polar offset."""
-    count = len(reference_sph)
-    guess = np.stack([np.radians(rng.choice(polar_offsets_deg, size=count)),
-                      rng.uniform(0, 2 * math.pi, size=count), np.zeros(count)], axis=1)
-    return rotation_errors(guess, reference_sph, target_sph)

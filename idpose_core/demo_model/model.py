@@ -4,7 +4,9 @@ Parts (same classes as Zero-1-to-3): a diffusers ``UNet2DConditionModel`` noise 
 transformers ``CLIPVisionModelWithProjection`` reference encoder, and ``cc_projection`` (Linear
 embedding + 4 -> embedding) producing the single cross-attention token. Deviation: the pose's
 Fourier features (optionally with the cc_projection token) also enter the timestep embedding through
-the UNet's projection class embedding, and optionally scale and shift every ResNet block (FiLM).
+the UNet's projection class embedding, and optionally scale and shift every ResNet block (FiLM);
+with ``absolute_view_conditioning`` those features describe the absolute target view, the relative
+pose composed onto the reference view that ``view_head`` reads from the reference embedding.
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from transformers import CLIPVisionModelWithProjection
 
 from idpose_core.demo_model.config import ZERO123_POSE_DIM, DemoModelConfig
 from idpose_core.demo_model.pose_features import fourier_pose_features
+from idpose_core.spherical import compose
 from idpose_core.zero123.predictor import pose_features
 
 WEIGHTS_FILE = "model.safetensors"
@@ -34,9 +37,11 @@ class DemoDiffusionModel(nn.Module):
         self.unet = UNet2DConditionModel(**config.unet_kwargs())
         self.image_encoder = CLIPVisionModelWithProjection(config.encoder_config())
         self.cc_projection = nn.Linear(config.embedding_dim + ZERO123_POSE_DIM, config.embedding_dim)
+        self.view_head = nn.Linear(config.embedding_dim, 3) if config.absolute_view_conditioning else None
         self.scheduler = DDPMScheduler(num_train_timesteps=config.num_train_timesteps,
                                        beta_start=config.beta_start, beta_end=config.beta_end,
-                                       beta_schedule=config.beta_schedule)
+                                       beta_schedule=config.beta_schedule,
+                                       prediction_type=config.prediction_type)
 
     def downsample(self, images: torch.Tensor) -> torch.Tensor:
         """Images (N, 3, H, W) in [-1, 1] -> (N, 3, r, r) at the model resolution (area-averaged: box filter)."""
@@ -59,12 +64,36 @@ class DemoDiffusionModel(nn.Module):
                       pose: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         """Predicted noise (B, 3, r, r) from noisy targets, reference images (B, 3, r, r), reference
         embeddings (B, D), relative poses (B, 3) and steps t (B,)."""
+        output = self.model_output(noisy, reference, embedding, pose, t)
+        if self.config.prediction_type == "epsilon":
+            return output
+        alpha_bar = self.scheduler.alphas_cumprod.to(noisy.device)[t].to(noisy.dtype).view(-1, 1, 1, 1)
+        return (noisy - alpha_bar.sqrt() * output) / (1 - alpha_bar).sqrt()
+
+    def model_output(self, noisy: torch.Tensor, reference: torch.Tensor, embedding: torch.Tensor,
+                     pose: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        """The UNet's raw output (B, 3, r, r): noise or clean target, as ``config.prediction_type`` says."""
         token = self.cc_projection(torch.cat([embedding, pose_features(pose).to(embedding.dtype)], -1))
+        if self.view_head is not None:
+            pose = compose(self.reference_view(embedding), pose)
         class_input = fourier_pose_features(pose).to(noisy.dtype)
         if self.config.token_in_timestep_embedding:
             class_input = torch.cat([class_input, token], -1)
         return self.unet(torch.cat([noisy, reference], 1), t, encoder_hidden_states=token[:, None],
                          class_labels=class_input).sample
+
+    def view_head_output(self, embedding: torch.Tensor) -> torch.Tensor:
+        """Reference embeddings (B, D) -> (B, 3): polar - pi/2, sin azimuth, cos azimuth of the reference view."""
+        if self.view_head is None:
+            raise ValueError("this model has no view head (absolute_view_conditioning is off)")
+        return self.view_head(embedding)
+
+    def reference_view(self, embedding: torch.Tensor) -> torch.Tensor:
+        """Reference embeddings (B, D) -> absolute reference views (B, 3): (polar, azimuth, 0) radians."""
+        out = self.view_head_output(embedding)
+        polar = out[:, 0] + torch.pi / 2
+        azimuth = torch.atan2(out[:, 1], out[:, 2])
+        return torch.stack([polar, azimuth, torch.zeros_like(polar)], -1)
 
     def save_pretrained(self, folder: Path) -> None:
         """Write ``config.json`` and ``model.safetensors`` into ``folder``."""

@@ -72,11 +72,13 @@ def cached_views(cache: Path, specs: Sequence[ObjectSpec], views_per_object: int
 @dataclass(frozen=True)
 class PairBatch:
     """B view pairs: ``reference``/``target`` (B, 3, r, r) in [-1, 1], true relative ``pose`` (B, 3)
-    reference -> target, and the indices (object, reference view, target view) each (B,)."""
+    reference -> target, the reference's absolute camera ``reference_view`` (B, 3), and the indices
+    (object, reference view, target view) each (B,)."""
 
     reference: torch.Tensor
     target: torch.Tensor
     pose: torch.Tensor
+    reference_view: torch.Tensor
     object_index: np.ndarray
     reference_index: np.ndarray
     target_index: np.ndarray
@@ -94,9 +96,10 @@ def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: 
         images.append(preprocess_views(rgbs, alphas, window_scale=float(scale)).images)
     small = downsample(torch.cat(images))
     small = small.reshape(len(images), 2, *small.shape[1:])
-    pose = relative(views.cameras[object_index, reference_index], views.cameras[object_index, target_index])
+    reference_view = views.cameras[object_index, reference_index]
+    pose = relative(reference_view, views.cameras[object_index, target_index])
     return PairBatch(small[:, 0], small[:, 1], torch.as_tensor(pose, dtype=torch.float32),
-                     object_index, reference_index, target_index)
+                     torch.as_tensor(reference_view, dtype=torch.float32), object_index, reference_index, target_index)
 
 
 def random_pairs(views: RenderedViews, rng: np.random.Generator, count: int) -> tuple[np.ndarray, ...]:
@@ -114,35 +117,35 @@ class PairPool:
     reused a few times instead of being prepared anew for every batch.
     """
 
+    FIELDS = ("reference", "target", "pose", "reference_view")
+
     def __init__(self, views: RenderedViews, downsample: Callable[[torch.Tensor], torch.Tensor],
                  capacity: int, refresh: int, window_scale_range: tuple[float, float]):
         self.views, self.downsample = views, downsample
         self.capacity, self.refresh, self.window_scale_range = capacity, refresh, window_scale_range
-        self.reference: torch.Tensor | None = None
-        self.target: torch.Tensor | None = None
-        self.pose: torch.Tensor | None = None
+        self.tensors: dict[str, torch.Tensor] = {}
 
-    def _fresh(self, rng: np.random.Generator, count: int) -> PairBatch:
+    def _fresh(self, rng: np.random.Generator, count: int) -> dict[str, torch.Tensor]:
         scales = rng.uniform(*self.window_scale_range, size=count)
-        return make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales)
+        batch = make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales)
+        return {name: getattr(batch, name) for name in self.FIELDS}
 
     def fill(self, rng: np.random.Generator, count: int) -> None:
         """Start the pool with ``count`` pairs."""
-        batch = self._fresh(rng, count)
-        self.reference, self.target, self.pose = batch.reference, batch.target, batch.pose
+        self.tensors = self._fresh(rng, count)
 
-    def draw(self, rng: np.random.Generator, batch: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def draw(self, rng: np.random.Generator, batch: int) -> tuple[torch.Tensor, ...]:
         """Add ``refresh`` fresh pairs (replacing random ones once full), then sample ``batch`` pairs:
-        (reference, target, pose)."""
-        if self.pose is None:
+        (reference, target, pose, reference_view)."""
+        if not self.tensors:
             raise RuntimeError("fill the pool before drawing from it")
         fresh = self._fresh(rng, self.refresh)
-        if len(self.pose) < self.capacity:
-            self.reference = torch.cat([self.reference, fresh.reference])
-            self.target = torch.cat([self.target, fresh.target])
-            self.pose = torch.cat([self.pose, fresh.pose])
+        size = len(self.tensors["pose"])
+        if size < self.capacity:
+            self.tensors = {name: torch.cat([self.tensors[name], fresh[name]]) for name in self.FIELDS}
         else:
-            slots = torch.as_tensor(rng.choice(len(self.pose), size=self.refresh, replace=False))
-            self.reference[slots], self.target[slots], self.pose[slots] = fresh.reference, fresh.target, fresh.pose
-        chosen = torch.as_tensor(rng.choice(len(self.pose), size=batch, replace=False))
-        return self.reference[chosen], self.target[chosen], self.pose[chosen]
+            slots = torch.as_tensor(rng.choice(size, size=self.refresh, replace=False))
+            for name in self.FIELDS:
+                self.tensors[name][slots] = fresh[name]
+        chosen = torch.as_tensor(rng.choice(len(self.tensors["pose"]), size=batch, replace=False))
+        return tuple(self.tensors[name][chosen] for name in self.FIELDS)
