@@ -44,7 +44,8 @@ def estimate_view_poses(
     ``rgbs`` N images (H_i, W_i, 3) uint8, ``alphas`` N masks (H_i, W_i) uint8 or None (then
     the mask is computed); ``anchor_polar`` (rad) is the anchor camera's polar angle around the
     object and ``object_distance`` its distance to the object centre, which sets the metric
-    scale; ``image_size`` is the side of the preprocessed views the model sees. Raises
+    scale; ``image_size`` is the side of the preprocessed views the model sees. A predictor's
+    ``solver_defaults`` (the demo model's noise levels) fill settings left at the paper's defaults. Raises
     ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and the solver's ``Cancelled``
     when ``cancel`` is set.
     """
@@ -52,6 +53,7 @@ def estimate_view_poses(
         raise ValueError(f"need at least 2 views with one alpha entry each, got {len(rgbs)} images "
                          f"and {len(alphas)} alphas")
     preprocessed = preprocess_views(list(rgbs), list(alphas), size=image_size)
+    solver_config = solver_config.with_recommended(getattr(predictor, "solver_defaults", {}))
     solved = estimate_poses(predictor, preprocessed.images, solver_config, progress=progress, cancel=cancel)
     poses = anchor_frame_poses(solved.rel_poses, anchor_polar, object_distance)
     return PipelineResult(poses=poses, solver_result=solved, preprocessed=preprocessed)

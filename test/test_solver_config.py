@@ -50,3 +50,19 @@ def test_polar_candidates_default_given_and_from_the_anchor():
     absolute = 60.0 + from_anchor
     assert absolute.min() > 0.0 and absolute.max() < 180.0
     assert absolute.min() - 45.0 <= 0.0 and absolute.max() + 45.0 >= 180.0, "must cover the whole range"
+
+
+def test_recommended_settings_fill_only_fields_left_at_the_paper_defaults():
+    recommended = {"probe_t": 0.85, "refine_t_range": (0.8, 0.9), "refine_lr": 0.5}
+    config = SolverConfig.preset("fast", refine_lr=2.0).with_recommended(recommended)
+    assert config.probe_t == 0.85 and config.refine_t_range == (0.8, 0.9)
+    assert config.refine_lr == 2.0  # the caller's own choice wins
+    assert config.refine_steps_per_view == SolverConfig.preset("fast").refine_steps_per_view
+    assert SolverConfig().with_recommended({}) == SolverConfig()
+
+
+def test_recommended_settings_are_checked():
+    with pytest.raises(ValueError, match="unknown SolverConfig fields \\['probe_time'\\]"):
+        SolverConfig().with_recommended({"probe_time": 0.5})
+    with pytest.raises(ValueError, match="probe_t"):
+        SolverConfig().with_recommended({"probe_t": 1.5})

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 
@@ -57,6 +59,18 @@ class SolverConfig:
         if name not in presets:
             raise ValueError(f"unknown solver preset {name!r}; choose one of {sorted(presets)}")
         config = replace(cls(), **{**presets[name], **overrides})
+        config.validate()
+        return config
+
+    def with_recommended(self, recommended: Mapping[str, Any]) -> SolverConfig:
+        """These settings with a predictor's recommendations (its ``solver_defaults``, e.g. the noise
+        levels a small model was trained at) in every field still at the paper's default value."""
+        unknown = sorted(set(recommended) - {f.name for f in fields(self)})
+        if unknown:
+            raise ValueError(f"recommended solver settings name unknown SolverConfig fields {unknown}")
+        paper = SolverConfig()
+        changed = {name: value for name, value in recommended.items() if getattr(self, name) == getattr(paper, name)}
+        config = replace(self, **changed)
         config.validate()
         return config
 
