@@ -13,6 +13,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from idpose_core.cameras import ZERO123_RADIUS, apply_relative, c2w_to_spherical, spherical_to_c2w
+from idpose_core.spherical import relative
 
 ROT_THRESHOLDS_DEG = (15.0, 30.0)
 POS_THRESHOLD = 0.2
@@ -40,6 +41,21 @@ def pair_errors(
     rot_err = rotation_angle_deg(target_c2w[..., :3, :3], pred_c2w[..., :3, :3])
     pos_err = np.linalg.norm(pred_c2w[..., :3, 3] - target_c2w[..., :3, 3], axis=-1) / anchor_sph[..., 2]
     return rot_err, pos_err
+
+
+def random_pose_errors(anchor_c2w: np.ndarray, target_c2w: np.ndarray, draws: int, rng: np.random.Generator
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The random-pose baseline: (rotation errors, position errors), each (P, draws), of guessing each of P
+    pairs' target camera uniformly on the sphere around the object at the anchor's distance.
+
+    ``anchor_c2w``, ``target_c2w`` (P, 4, 4) true OpenGL camera-to-world matrices; scored by ``pair_errors``.
+    """
+    anchor_c2w = np.asarray(anchor_c2w, dtype=np.float64)[:, None]
+    anchor_sph = c2w_to_spherical(anchor_c2w)
+    shape = (len(anchor_c2w), draws)
+    guess = np.stack([np.arccos(rng.uniform(-1.0, 1.0, shape)), rng.uniform(0.0, 2 * np.pi, shape),
+                      np.broadcast_to(anchor_sph[..., 2], shape)], axis=-1)
+    return pair_errors(relative(anchor_sph, guess), anchor_c2w, np.asarray(target_c2w, dtype=np.float64)[:, None])
 
 
 def _summary(rot_err: np.ndarray, pos_err: np.ndarray) -> dict[str, float | int]:

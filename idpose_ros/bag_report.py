@@ -17,6 +17,7 @@ from idpose_ros.bag_views import BagViews  # noqa: E402
 if TYPE_CHECKING:
     from idpose_ros.evaluate_bag import EvaluationRun
 
+RANDOM_METHOD = "random poses"
 COLUMNS = (("rot_acc_15", "RotAcc@15° ↑", True), ("rot_acc_30", "RotAcc@30° ↑", True),
            ("pos_acc_0.2", "PosAcc@0.2 ↑", True), ("mean_rot_err_deg", "mean rot. err. (°) ↓", False),
            ("mean_pos_err", "mean pos. err. ↓", False), ("pairs", "pairs", False))
@@ -34,15 +35,17 @@ def model_name(model: dict[str, Any]) -> str:
     return model.get("predictor", "unknown")
 
 
-def markdown_table(aggregates: dict[str, dict[str, float | int]], method: str) -> str:
-    """Rows: the method with each view count, then all pairs; accuracies in percent, as in the paper's Table 1."""
+def markdown_table(methods: dict[str, dict[str, dict[str, float | int]]]) -> str:
+    """Rows: each method (name -> aggregates) with each view count, then all pairs; accuracies in percent,
+    as in the paper's Table 1."""
     header = "| method | views | " + " | ".join(title for _, title, _ in COLUMNS) + " |"
     rule = "|" + "---|" * (len(COLUMNS) + 2)
     rows = []
-    for group, summary in aggregates.items():
-        cells = [f"{100.0 * summary[key]:.1f}" if percent else
-                 str(summary[key]) if key == "pairs" else f"{summary[key]:.3g}" for key, _, percent in COLUMNS]
-        rows.append(f"| {method} | {group} | " + " | ".join(cells) + " |")
+    for method, aggregates in methods.items():
+        for group, summary in aggregates.items():
+            cells = [f"{100.0 * summary[key]:.1f}" if percent else
+                     str(summary[key]) if key == "pairs" else f"{summary[key]:.3g}" for key, _, percent in COLUMNS]
+            rows.append(f"| {method} | {group} | " + " | ".join(cells) + " |")
     return "\n".join([header, rule, *rows])
 
 
@@ -71,9 +74,9 @@ def write_report(out: Path, args: argparse.Namespace, values: dict[str, Any], mo
                  bag: BagViews, run: EvaluationRun, seconds: float) -> str:
     """Write report.json, report.md and cameras_<sample>.png into ``out``; returns the markdown table."""
     out.mkdir(parents=True, exist_ok=True)
-    aggregates = run.aggregates
+    aggregates, random_aggregates = run.aggregates, run.random_aggregates
     method = f"ID-Pose ({values['variant']})"
-    table = markdown_table(aggregates, method)
+    table = markdown_table({method: aggregates, RANDOM_METHOD: random_aggregates})
     views_by_id = {view.view_id: view for view in bag.views}
     report = {
         "bag": str(args.bag), "image_topic": args.image_topic, "ground_truth": ground_truth_source(args),
@@ -86,6 +89,8 @@ def write_report(out: Path, args: argparse.Namespace, values: dict[str, Any], mo
             {"view": view_id, "stamp": views_by_id[view_id].stamp * 1e-9, "reason": reason}
             for view_id, reason in bag.skipped.items()]},
         "picks": run.picks, "estimates": run.estimates, "pairs": run.records, "aggregates": aggregates,
+        "random_baseline": {"guesses_per_pair": len(run.random_records) // max(len(run.records), 1),
+                            "aggregates": random_aggregates},
         "seconds": seconds,
     }
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -100,7 +105,9 @@ def write_report(out: Path, args: argparse.Namespace, values: dict[str, Any], mo
         f"Ground truth: {report['ground_truth']}. Views on {args.image_topic}: {len(bag.views)}, "
         f"usable {len(bag.pool)}, skipped {len(bag.skipped)}.\n\n"
         f"{table}\n\n"
-        "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance.\n"
+        "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance. "
+        f"{RANDOM_METHOD}: each pair's target camera guessed uniformly on the sphere at the anchor's distance, "
+        f"{report['random_baseline']['guesses_per_pair']} guesses per pair (its pairs column counts guesses).\n"
         + (f"\n## Skipped views\n\n{skipped}" if skipped else ""))
     for sample, pick in enumerate(run.picks):
         predicted = run.predicted_cameras[sample]

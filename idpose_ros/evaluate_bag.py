@@ -32,7 +32,7 @@ from idpose_core.evaluation import (
     relative_from_anchor_frame,
     score_pairs,
 )
-from idpose_core.metrics import aggregate
+from idpose_core.metrics import aggregate, random_pose_errors
 from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import estimate_view_poses
 from idpose_core.predictor import NoisePredictor
@@ -47,6 +47,7 @@ from idpose_ros.replay import ReplayError, ReplayEstimator
 ImageMessage = Image | CompressedImage
 Progress = Callable[[str, int, int], None]
 NODE_BOUNDS = {name: spec["bounds"] for name, _, spec in parameter_table()}
+RANDOM_DRAWS = 200  # random-pose guesses per scored pair: the baseline row of the report
 DEFAULT_IMAGE_SIZE = next(default for name, default, _ in parameter_table() if name == "image_size")
 
 
@@ -106,11 +107,14 @@ class OfflineEstimator:
 
 @dataclass
 class EvaluationRun:
-    """Everything the report needs: per-pair records, per-estimate rows and per-sample cameras."""
+    """Everything the report needs: per-pair records, per-estimate rows, per-sample cameras and the
+    random-pose baseline on the same pairs (``RANDOM_DRAWS`` guesses per pair, seeded by ``seed``)."""
 
     picks: list[list[int]]
     view_counts: list[int]
+    seed: int = 0
     records: list[dict[str, Any]] = field(default_factory=list)
+    random_records: list[dict[str, Any]] = field(default_factory=list)
     estimates: list[dict[str, Any]] = field(default_factory=list)
     true_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> (k, 4, 4) OpenGL c2w
     predicted_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> largest n's
@@ -118,6 +122,17 @@ class EvaluationRun:
     @property
     def aggregates(self) -> dict[str, dict[str, float | int]]:
         return aggregate(self.records)
+
+    @property
+    def random_aggregates(self) -> dict[str, dict[str, float | int]]:
+        """The same metrics for random guesses of the target cameras (``pairs`` counts guesses)."""
+        return aggregate(self.random_records)
+
+    def add_random_baseline(self, n: int, true_c2w: np.ndarray) -> None:
+        """Score ``RANDOM_DRAWS`` uniform guesses of each of the views 1..n-1 of one estimate (anchor first)."""
+        rng = np.random.default_rng([self.seed, len(self.estimates), n])
+        rot, pos = random_pose_errors(np.repeat(true_c2w[:1], n - 1, axis=0), true_c2w[1:n], RANDOM_DRAWS, rng)
+        self.random_records.extend({"n": n, "rot_err_deg": r, "pos_err": p} for r, p in zip(rot.ravel(), pos.ravel()))
 
 
 def usable_view_counts(requested: Sequence[int], pool_size: int) -> list[int]:
@@ -137,7 +152,7 @@ def plan_evaluation(bag: BagViews, image_topic: str, samples: int, seed: int, vi
         raise BagError(f"fewer than 2 usable views ({len(bag.pool)} of {len(bag.views)} on {image_topic})"
                        + (f"; skipped {reasons}" if reasons else ""))
     return EvaluationRun(picks=draw_picks(bag.pool, samples, seed),
-                         view_counts=usable_view_counts(view_counts, len(bag.pool)))
+                         view_counts=usable_view_counts(view_counts, len(bag.pool)), seed=seed)
 
 
 def run_evaluation(bag_path: Path, image_topic: str, bag: BagViews, run: EvaluationRun, estimator: ViewSetEstimator,
@@ -168,6 +183,7 @@ def run_evaluation(bag_path: Path, image_topic: str, bag: BagViews, run: Evaluat
                     run.records.append({"sample": sample, "n": n, "anchor_view": pick[0], "view": target, **record,
                                         "score": float(score), "ambiguous": bool(ambiguous),
                                         "seconds": estimate.seconds})
+                run.add_random_baseline(n, true_c2w)
                 run.estimates.append({"sample": sample, "n": n, "views": pick[:n], "seconds": estimate.seconds,
                                       "anchor_polar_deg": anchor_polar_deg, "object_distance": distance})
                 run.predicted_cameras[sample] = np.concatenate([true_c2w[:1], predicted_c2w(true_c2w[0], rel)])

@@ -95,6 +95,16 @@ def test_the_oracle_scores_100_percent_on_every_view_count(oracle_run, oracle):
         np.testing.assert_allclose(record["pred_rel_sph"][:2], record["true_rel_sph"][:2], atol=np.radians(3))
 
 
+def test_random_baseline_scores_uniform_guesses_of_the_same_pairs(oracle_run):
+    """A uniform guess lands within 30 deg of a camera about 1 - cos(30 deg) / 2 = 6.7 % of the time."""
+    _, run = oracle_run
+    random = run.random_aggregates
+    assert list(random) == ["2", "4", "6", "8", "all"]
+    assert [random[k]["pairs"] for k in random] == [200 * p for p in (2, 6, 10, 14, 32)]
+    assert 0.03 < random["all"]["rot_acc_30"] < 0.11 and random["all"]["rot_acc_15"] < random["all"]["rot_acc_30"]
+    assert 70.0 < random["all"]["mean_rot_err_deg"] < 130.0
+
+
 def test_tf_and_pose_topic_ground_truth_give_the_same_numbers(demo_bag, oracle):
     """Same picks, same estimates: the two ground-truth sources score identically (one 2-view set each)."""
     estimator = OfflineEstimator(oracle, node_values("fast", None, ORACLE_SOLVER))
@@ -131,6 +141,8 @@ def test_report_files(tmp_path, demo_bag, oracle_run):
     assert table in markdown
     assert "| ID-Pose (full) | 8 | 100.0 | 100.0 | 100.0 |" in table
     assert "| ID-Pose (full) | all | 100.0 | 100.0 | 100.0 |" in table
+    assert "| random poses | all |" in table and report["random_baseline"]["guesses_per_pair"] == 200
+    assert report["random_baseline"]["aggregates"]["all"]["rot_acc_30"] < 0.2
     for sample in (0, 1):
         image = cv2.imread(str(args.out / f"cameras_{sample}.png"))
         assert image is not None and image.shape[0] > 100
