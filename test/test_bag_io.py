@@ -15,7 +15,7 @@ from sensor_msgs.msg import CompressedImage
 from std_msgs.msg import Header
 
 from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
-from idpose_core.synthetic.scenes import random_camera_spheres
+from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_core.transforms import rigid_transform
 from idpose_ros.bag_io import BagError, BagWriter
 from idpose_ros.bag_views import decode_view, load_view_messages, read_bag_views
@@ -201,9 +201,11 @@ def test_a_bag_without_transforms_asks_for_a_gt_topic(tmp_path):
         read_bag_views(path, "/img")
 
 
-def test_the_shipped_demo_bag():
-    """data/demo_bag: 12 views of the duck from make_synthetic_bag (mcap, seed 0, 256 px), small enough to ship."""
-    path = Path(__file__).resolve().parents[1] / "data" / "demo_bag"
+@pytest.mark.parametrize("name", [spec.name for spec in demo_objects()])
+def test_the_shipped_demo_bags(name):
+    """data/demo_bags/<object>: 12 views of each demo object from make_synthetic_bag (mcap, seed 0, 256 px),
+    small enough to ship."""
+    path = Path(__file__).resolve().parents[1] / "data" / "demo_bags" / name
     assert sum(f.stat().st_size for f in path.iterdir()) < 5 * 1024 * 1024
     bag = read_bag_views(path, IMAGE_TOPIC)
     assert bag.pool == list(range(12)) and bag.skipped == {}

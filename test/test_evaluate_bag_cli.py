@@ -16,7 +16,7 @@ from idpose_ros.evaluate_bag import usable_view_counts
 from idpose_ros.make_synthetic_bag import write_rgba_image, write_tf
 
 SECOND = 1_000_000_000
-DEMO_BAG = Path(__file__).resolve().parents[1] / "data" / "demo_bag"
+DEMO_BAG = Path(__file__).resolve().parents[1] / "data" / "demo_bags" / "duck"
 
 
 @pytest.fixture(scope="module")
@@ -97,8 +97,8 @@ def test_small_pools_evaluate_the_view_counts_they_can_hold():
 def test_ros2_run_finds_both_commands_and_the_installed_demo_bag(workspace):
     """As `ros2 run idpose_ros evaluate_bag` runs it: the installed script on the installed demo bag."""
     prefix = workspace / "install" / "idpose_ros"
-    bag = prefix / "share" / "idpose_ros" / "data" / "demo_bag"
-    assert (bag / "metadata.yaml").is_file() and (bag / "demo_bag.mcap").is_file()
+    bag = prefix / "share" / "idpose_ros" / "data" / "demo_bags" / "duck"
+    assert (bag / "metadata.yaml").is_file() and (bag / "duck.mcap").is_file()
     for name in ("evaluate_bag", "make_synthetic_bag"):
         assert (prefix / "lib" / "idpose_ros" / name).is_file()
     script = (f". {workspace / 'install' / 'setup.sh'} && "
