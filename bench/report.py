@@ -38,7 +38,7 @@ def step_cost_section(report: dict | None) -> list[str]:
     lines = ["### 1. One step and one probe, full-size model (random weights, float32, 256 px)", "",
              f"{machine['cpus']} CPUs, {machine['threads']} torch threads, torch {machine['torch']}, "
              f"{machine['platform']}; load average {machine['load_average_before'][0]:.1f} before, "
-             f"{machine['load_average_after'][0]:.1f} after (shared machine); medians of "
+             f"{machine['load_average_after'][0]:.1f} after (the run's own threads count in it); medians of "
              f"{report['setup']['alternations']} alternations.", "",
              "| measurement | wall s | CPU s | peak GB |", "| --- | ---: | ---: | ---: |"]
     lines += [f"| {kind} | {median[kind]['seconds']:.2f} | {median[kind]['cpu_seconds']:.2f} | "
@@ -178,8 +178,8 @@ def closing_note(steps: dict | None, counts: dict | None, schedule: dict | None,
     default = {n: results["steps=600"]["rot_acc_15"] for n, results in schedule["results"].items()}
     quiet = ISSUE_REFERENCE["official_step"] / ISSUE_REFERENCE["ours_step"]
     text = (f"Per step the official path costs {ratio['step_seconds']:.2f}x our wall time and "
-            f"{ratio['step_cpu_seconds']:.2f}x our CPU time in this run (a busy machine: load average "
-            f"{steps['machine']['load_average_before'][0]:.1f} on {steps['machine']['cpus']} cores), against "
+            f"{ratio['step_cpu_seconds']:.2f}x our CPU time in this run (1-minute load average "
+            f"{steps['machine']['load_average_before'][0]:.1f} before it on {steps['machine']['cpus']} cores), against "
             f"{quiet:.2f}x in the issue's quiet-machine figures, and {ratio['step_peak_gb']:.2f}x our peak memory. "
             f"A two-view estimate with the paper's schedule is projected at 1/{speedup(two, 'default', 'seconds'):.1f} "
             f"of the official time from this run's wall times (1/{speedup(two, 'default', 'cpu_seconds'):.1f} from CPU "

@@ -100,6 +100,10 @@ class EstimatorNode(Node):
         started = time.monotonic()
         predictor = load_predictor(settings.model_path, device=settings.device, precision=settings.precision)
         self.get_logger().info(f"model loaded in {time.monotonic() - started:.1f} s")
+        recommended = getattr(predictor, "solver_defaults", {})
+        if recommended:
+            self.get_logger().info(f"the model recommends solver settings {recommended}: they replace the "
+                                   "paper's defaults where a parameter is left at its default")
         return predictor
 
     def _model_unavailable(self, reason: str) -> None:
