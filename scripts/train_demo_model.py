@@ -40,7 +40,7 @@ from idpose_core.demo_model.training_data import (PairBatch, PairPool, RenderedV
 from idpose_core.metrics import random_pose_errors
 from idpose_core.synthetic.scenes import demo_objects
 
-GAP_TIMESTEPS = (300, 500, 700, 850)
+GAP_TIMESTEPS = (400, 550, 700, 850)  # inside the default training range
 CHECK_AZIMUTHS = 12
 CHECK_POLARS_DEG = (-45.0, 0.0, 45.0)
 
@@ -115,6 +115,14 @@ def loss_gaps(predictor: DemoPredictor, pairs: PairBatch, seed: int) -> dict[int
         wrong_loss = predictor.noise_error(views, ref, tgt, wrong, steps, noise).mean()
         gaps[t] = float((wrong_loss - true_loss) / true_loss)
     return gaps
+
+
+def probe_timestep(gaps: dict[int, float], args: argparse.Namespace) -> int:
+    """The timestep with the largest loss gap among those the model was trained at (the solver probes there)."""
+    trained = {t: gap for t, gap in gaps.items() if args.t_min <= t <= args.t_max}
+    if not trained:
+        raise ValueError(f"no loss-gap timestep {sorted(gaps)} lies in the training range [{args.t_min}, {args.t_max}]")
+    return max(trained, key=trained.get)
 
 
 def inversion_check(predictor: DemoPredictor, pairs: PairBatch, views: RenderedViews, t: int) -> dict[str, float]:
@@ -235,7 +243,7 @@ def main() -> None:
             predictor = ema_predictor(model, ema, config)
             gaps = loss_gaps(predictor, gap_pairs, args.seed + 3)
             if now - last_check >= args.check_every_minutes * 60.0:
-                best_t = max(gaps, key=gaps.get)
+                best_t = probe_timestep(gaps, args)
                 result = inversion_check(predictor, check_pairs, heldout, best_t)
                 row_check = [best_t, result["acc15"], result["acc30"]]
                 tqdm.write(f"step {step}: inversion check at t={best_t}: RotAcc@15 {result['acc15']:.0%}, "
@@ -257,7 +265,7 @@ def main() -> None:
     save_checkpoint(checkpoint_path, model, optimizer, ema, step, elapsed, history)
     predictor = ema_predictor(model, ema, config)
     gaps = loss_gaps(predictor, gap_pairs, args.seed + 3)
-    best_t = max(gaps, key=gaps.get)
+    best_t = probe_timestep(gaps, args)
     final = inversion_check(predictor, check_pairs, heldout, best_t)
     print(f"final: step {step}, {elapsed / 60:.1f} min, gaps {gaps}, check at t={best_t}: {final}")
     predictor.model.save_pretrained(args.out)
@@ -288,8 +296,8 @@ def plot_curve(curve_path: Path, png_path: Path) -> None:
         rows = list(csv.DictReader(handle))
     minutes = [float(row["minutes"]) for row in rows]
     figure, (gap_axes, check_axes) = plt.subplots(1, 2, figsize=(11, 4))
-    for t in GAP_TIMESTEPS:
-        gap_axes.plot(minutes, [100 * float(row[f"gap_t{t}"]) for row in rows], label=f"t = {t}")
+    for column in [name for name in rows[0] if name.startswith("gap_t")]:
+        gap_axes.plot(minutes, [100 * float(row[column]) for row in rows], label=f"t = {column[5:]}")
     gap_axes.set(xlabel="training minutes", ylabel="loss gap, wrong vs true pose (%)", title="held-out pairs")
     gap_axes.legend()
     checks = [row for row in rows if row["acc30"]]

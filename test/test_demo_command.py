@@ -1,22 +1,23 @@
-"""`./run demo` (idpose_ros.demo) runs evaluate_bag on the shipped bag and says which model it used."""
+"""`./run demo` (idpose_ros.demo) evaluates every shipped demo bag with the embedded model and sums up."""
 import json
 
-import pytest
-
-from idpose_core.demo_model.model import WEIGHTS_FILE
-from idpose_core.demo_model.predictor import EMBEDDED_MODEL_DIR
 from idpose_ros import demo
 
+REDUCED = ["--image-size", "64", "--solver-param", "azimuth_candidates=2", "--solver-param", "adjust_steps=0",
+           "--solver-param", "probe_batch=1", "--solver-param", "refine_steps_per_view=2",
+           "--solver-param", "runner_up_steps=0"]
 
-@pytest.mark.skipif((EMBEDDED_MODEL_DIR / WEIGHTS_FILE).is_file(), reason="embedded weights ship: covered by test_demo_model*")
-def test_demo_without_embedded_weights_names_the_random_model(tmp_path, monkeypatch, capsys):
-    """Reduced: 1 azimuth candidate, probe batch 1, no adjustment, 2 refinement steps, 32 px."""
+
+def test_demo_evaluates_each_demo_object_with_the_embedded_model(tmp_path, monkeypatch, capsys):
+    """Reduced solver (2 azimuth candidates, probe batch 1, 2 refinement steps, 64 px): the wiring, not accuracy."""
     monkeypatch.chdir(tmp_path)
-    code = demo.main(["--image-size", "32", "--solver-param", "azimuth_candidates=1",
-                      "--solver-param", "adjust_steps=0", "--solver-param", "probe_batch=1",
-                      "--solver-param", "refine_steps_per_view=2", "--solver-param", "runner_up_steps=0"])
+    assert demo.main(REDUCED) == 0
     out = capsys.readouterr().out
-    assert code == 0
-    assert "RANDOM weights" in out and "| 2 |" in out
-    report = json.loads((tmp_path / "demo_output" / "report.json").read_text())
-    assert report["aggregates"]["2"]["pairs"] == 1
+    names = [bag.name for bag in demo.demo_bags()]
+    assert names == ["desk", "duck", "lego", "mug", "soccerball", "teddy"]
+    summary = out.split("All demo objects")[1]
+    for name in names:
+        report = json.loads((tmp_path / "demo_output" / name / "report.json").read_text())
+        assert report["model"]["model_path"] == "" and report["aggregates"]["2"]["pairs"] == 1
+        assert f"| {name} | 1 |" in summary
+    assert "| all | 6 |" in summary
