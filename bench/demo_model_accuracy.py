@@ -24,8 +24,8 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import torch  # noqa: E402 (after the path setup)
 
-from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects, unseen_objects  # noqa: E402
+from idpose_ros.bag_report import pooled_summaries  # noqa: E402
 from idpose_ros.evaluate_bag import main as evaluate_bag  # noqa: E402
 from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
 
@@ -34,7 +34,7 @@ OUT = ROOT / "bench" / "results" / "demo_model_accuracy.json"
 
 def evaluate_set(object_set: str, names: list[str], args: argparse.Namespace, work: Path) -> dict:
     """Make one bag per object, evaluate each; the pooled aggregates of the model and of random poses."""
-    pairs, random_rows, seconds = [], [], []
+    reports, seconds = [], []
     for name in names:
         bag = work / f"{object_set}_{name}"
         if make_synthetic_bag([str(bag), "--objects", object_set, "--object", name, "--views", str(args.views),
@@ -44,15 +44,10 @@ def evaluate_set(object_set: str, names: list[str], args: argparse.Namespace, wo
         if evaluate_bag([str(bag), "--out", str(report_dir), "--n", "2", "--samples", str(args.samples),
                          "--preset", args.preset, "--seed", str(args.seed)]):
             raise RuntimeError(f"evaluate_bag failed on {bag}")
-        report = json.loads((report_dir / "report.json").read_text())
-        pairs += report["pairs"]
-        random_rows.append(report["random_baseline"]["aggregates"]["all"])
-        seconds += [estimate["seconds"] for estimate in report["estimates"]]
-    guesses = sum(row["pairs"] for row in random_rows)
-    random = {key: sum(row[key] * row["pairs"] for row in random_rows) / guesses
-              for key in ("rot_acc_15", "rot_acc_30", "mean_rot_err_deg")}
-    return {"objects": names, "model": aggregate(pairs)["all"], "random": {"guesses": guesses, **random},
-            "seconds_per_estimate": sum(seconds) / len(seconds)}
+        reports.append(json.loads((report_dir / "report.json").read_text()))
+        seconds += [estimate["seconds"] for estimate in reports[-1]["estimates"]]
+    model, random = pooled_summaries(reports)
+    return {"objects": names, "model": model, "random": random, "seconds_per_estimate": sum(seconds) / len(seconds)}
 
 
 def main() -> None:
@@ -74,8 +69,8 @@ def main() -> None:
                                                Path(folder))}
     result = {"arguments": {k: str(v) for k, v in vars(args).items()}, "minutes": (time.monotonic() - started) / 60,
               "sets": sets}
-    print(f"\n| set | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° | random RotAcc@30° "
-          f"| s / estimate |\n|---|---|---|---|---|---|---|---|")
+    print("\n| set | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° | random RotAcc@30° "
+          "| s / estimate |\n|---|---|---|---|---|---|---|---|")
     for name, row in sets.items():
         model, random = row["model"], row["random"]
         print(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | {100 * model['rot_acc_30']:.1f} | "

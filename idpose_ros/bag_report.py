@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interactive backend)
 import numpy as np  # noqa: E402
 
+from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_ros.bag_views import BagViews  # noqa: E402
 
 if TYPE_CHECKING:
@@ -47,6 +49,17 @@ def markdown_table(methods: dict[str, dict[str, dict[str, float | int]]]) -> str
                      str(summary[key]) if key == "pairs" else f"{summary[key]:.3g}" for key, _, percent in COLUMNS]
             rows.append(f"| {method} | {group} | " + " | ".join(cells) + " |")
     return "\n".join([header, rule, *rows])
+
+
+def pooled_summaries(reports: Sequence[dict[str, Any]]) -> tuple[dict[str, float | int], dict[str, float | int]]:
+    """Over several reports (report.json contents): the model's summary of all their pairs, and the
+    random-pose baseline's RotAcc@15/30 and mean rotation error weighted by each report's guesses."""
+    model = aggregate([pair for report in reports for pair in report["pairs"]])["all"]
+    rows = [report["random_baseline"]["aggregates"]["all"] for report in reports]
+    guesses = sum(row["pairs"] for row in rows)
+    random = {key: sum(row[key] * row["pairs"] for row in rows) / guesses
+              for key in ("rot_acc_15", "rot_acc_30", "mean_rot_err_deg")}
+    return model, {"guesses": guesses, **random}
 
 
 def plot_cameras(path: Path, true_c2w: np.ndarray, pred_c2w: np.ndarray, views: list[int], title: str) -> None:

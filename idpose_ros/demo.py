@@ -10,7 +10,7 @@ import json
 import sys
 from pathlib import Path
 
-from idpose_core.metrics import aggregate
+from idpose_ros.bag_report import pooled_summaries
 from idpose_ros.evaluate_bag import main as evaluate_bag
 
 DEMO_BAGS = Path(__file__).resolve().parents[1] / "data" / "demo_bags"
@@ -29,11 +29,7 @@ def summary_table(reports: dict[str, dict]) -> str:
              "|---|---|---|---|---|---|---|"]
     rows = {name: (report["aggregates"]["all"], report["random_baseline"]["aggregates"]["all"])
             for name, report in reports.items()}
-    pairs = [pair for report in reports.values() for pair in report["pairs"]]
-    random = [report["random_baseline"]["aggregates"]["all"] for report in reports.values()]
-    total = sum(r["pairs"] for r in random)
-    rows["all"] = (aggregate(pairs)["all"],
-                   {key: sum(r[key] * r["pairs"] for r in random) / total for key in ("rot_acc_15", "rot_acc_30")})
+    rows["all"] = pooled_summaries(list(reports.values()))
     for name, (model, baseline) in rows.items():
         lines.append(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | {100 * model['rot_acc_30']:.1f} | "
                      f"{model['mean_rot_err_deg']:.1f} | {100 * baseline['rot_acc_15']:.1f} | "
