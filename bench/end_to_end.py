@@ -1,13 +1,11 @@
 """End-to-end seconds per estimate with the small demo model on this CPU, n = 2 and 4.
 
 The model comes through ``load_predictor("")`` (the embedded demo model, ``idpose_core/assets/
-demo_model``; loading timed once), or ``--model-dir``. While no trained demo weights are installed,
-it times randomly initialised weights of the demo architecture instead (``DemoModelConfig()``; the
-cost of an estimate does not depend on the weights) and says so: its rotation errors mean nothing.
-Scenes: fresh random cameras (seeds no training run used) around the demo objects, rendered at 256
-px with their alpha masks. Each estimate is the pipeline the node runs: ``estimate_view_poses``
-(preprocess -> solve -> anchor-frame poses) under a solver preset plus the model's own
-``solver_defaults`` (its timesteps).
+demo_model``; loading timed once), or ``--model-dir``. Scenes: fresh random cameras (seeds no
+training run used) around the demo objects, rendered at 256 px with their alpha masks. Each
+estimate is the pipeline the node runs: ``estimate_view_poses`` (preprocess -> solve -> anchor-frame
+poses) under a solver preset plus the model's own ``solver_defaults`` (its timesteps). Rotation
+errors are reported beside the times.
 
 Usage (from the repository root): python -m bench.end_to_end [--views 2 4] [--presets default fast]
        [--scenes 2] [--threads 1] [--model-dir FOLDER]
@@ -26,16 +24,14 @@ import torch
 
 from bench.unit_costs import RESULTS
 from idpose_core.cameras import spherical_to_c2w
-from idpose_core.demo_model import DemoDiffusionModel, DemoModelConfig, DemoPredictor
+from idpose_core.demo_model import DemoPredictor
 from idpose_core.model_loading import load_predictor
 from idpose_core.metrics import pair_errors
 from idpose_core.pipeline import estimate_view_poses
 from idpose_core.solver import SolverConfig
-from idpose_core.zero123 import ModelLoadError
 from idpose_core.synthetic.scenes import CAMERA_RADIUS, SceneRenderer, demo_objects, random_camera_spheres
 
 IMAGE_SIZE = 256
-RANDOM_WEIGHTS = "random (no trained demo weights installed): timing only"
 SCENE_SEED = 4242  # the demo model's training and accuracy runs use other seeds
 
 
@@ -50,15 +46,10 @@ def render_scene(scene: int, count: int) -> tuple[str, np.ndarray, list[np.ndarr
 
 
 def demo_predictor(model_dir: str) -> tuple[DemoPredictor, str]:
-    """The model to time and what its weights are: a given folder, the embedded model, or random weights."""
+    """The model to time and where its weights come from: a given folder or the embedded model."""
     if model_dir:
         return DemoPredictor.from_pretrained(model_dir), f"folder {model_dir}"
-    try:
-        return load_predictor("", device="cpu"), "embedded"
-    except ModelLoadError as missing:
-        print(f"no embedded demo model ({missing}); timing random weights of the demo architecture instead")
-        torch.manual_seed(0)
-        return DemoPredictor(DemoDiffusionModel(DemoModelConfig())), RANDOM_WEIGHTS
+    return load_predictor("", device="cpu"), "embedded"
 
 
 def main() -> None:

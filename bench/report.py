@@ -113,24 +113,21 @@ def schedule_section(report: dict | None) -> list[str]:
 
 
 def end_to_end_section(report: dict | None) -> list[str]:
-    """Item 4: seconds per estimate with the demo model (accuracy only when its weights are trained)."""
+    """Item 4: seconds per estimate and rotation accuracy with the demo model."""
     title = "### 4. End to end with the small demo model"
     if report is None or report.get("status") != "measured":
         return [title, "", "not run (`python -m bench.end_to_end`)."]
-    trained = not report["weights"].startswith("random")
     lines = [title, "", f"Weights: {report['weights']}. {report['threads']} torch thread(s), model loaded in "
              f"{report['load_seconds']:.2f} s (not counted below), load average {report['load_average'][0]:.1f} -> "
              f"{report['load_average'][1]:.1f}. Each estimate: preprocessing of 256 px renders, the solver, "
              "anchor-frame poses (`estimate_view_poses`).", "",
-             "| n | preset | median s per estimate | scenes | samples (differentiated) |"
-             + (" RotAcc@15 | RotAcc@30 | pairs |" if trained else ""),
-             "| ---: | --- | ---: | ---: | ---: |" + (" ---: | ---: | ---: |" if trained else "")]
+             "| n | preset | median s per estimate | scenes | samples (differentiated) | RotAcc@15 | RotAcc@30 | pairs |",
+             "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for row in report["rows"]:
         first = row["runs"][0]
         cells = [str(row["n"]), row["preset"], f"{row['median_seconds']:.1f}", str(len(row["runs"])),
-                 f"{first['forward_samples']} ({first['backward_samples']})"]
-        if trained:
-            cells += [f"{row['rot_acc_15']:.0%}", f"{row['rot_acc_30']:.0%}", str(row["pairs"])]
+                 f"{first['forward_samples']} ({first['backward_samples']})",
+                 f"{row['rot_acc_15']:.0%}", f"{row['rot_acc_30']:.0%}", str(row["pairs"])]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -188,9 +185,7 @@ def closing_note(steps: dict | None, counts: dict | None, schedule: dict | None,
             f"1/{speedup(two, 'fast', 'reference_seconds'):.1f}), with oracle RotAcc@15 "
             + ", ".join(f"{fast[n]:.0%} vs {default[n]:.0%} (n = {n})" for n in sorted(fast)) + ".")
     if end_to_end and end_to_end.get("status") == "measured":
-        random = end_to_end["weights"].startswith("random")
-        text += (" End to end, the demo model's architecture" + (" (random weights: the trained ones are not "
-                 "installed)" if random else "") + " takes " + ", ".join(
+        text += (" End to end, the demo model takes " + ", ".join(
             f"{row['median_seconds']:.0f} s (n = {row['n']}, {row['preset']})" for row in end_to_end["rows"])
                  + " per estimate on one thread.")
     return ["### Closing note", "", text]
