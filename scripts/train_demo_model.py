@@ -163,6 +163,7 @@ def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: to
     wanted_view = torch.stack([polar - math.pi / 2, torch.sin(azimuth), torch.cos(azimuth)], -1)
     return denoising + view_weight * (model.view_head_output(embedding) - wanted_view).pow(2).mean(), denoising
 
+
 def learning_rate_factor(step: int, progress: float) -> float:
     """Linear warm-up over 200 steps, then a cosine decay to a tenth over the wall-time budget."""
     cosine = 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
