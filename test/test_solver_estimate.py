@@ -6,6 +6,7 @@ and 10 runner-up steps per view (paper: 8 x 5, 10, 600); the oracle's learning r
 """
 import math
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -28,6 +29,8 @@ class CountingPredictor:
         self.num_train_timesteps = oracle.num_train_timesteps
         self.encode_calls = 0
         self.calls: list[tuple[int, bool]] = []
+        self.back_propagated = 0  # differentiated calls whose errors have received their gradient
+        self.pending_at_call: list[int] = []  # per differentiated call: earlier ones not yet back-propagated
 
     def encode(self, images):
         self.encode_calls += 1
@@ -35,7 +38,15 @@ class CountingPredictor:
 
     def noise_error(self, views, ref, tgt, pose, t, noise):
         self.calls.append((len(ref), pose.requires_grad))
-        return self.oracle.noise_error(views, ref, tgt, pose, t, noise)
+        errors = self.oracle.noise_error(views, ref, tgt, pose, t, noise)
+        if pose.requires_grad:
+            earlier = sum(grad for _, grad in self.calls[:-1])
+            self.pending_at_call.append(earlier - self.back_propagated)
+            errors.register_hook(self._count_backward)
+        return errors
+
+    def _count_backward(self, grad):
+        self.back_propagated += 1
 
 
 
@@ -73,6 +84,22 @@ def test_probes_fill_batches_up_to_max_batch():
     # exploration, re-probe, selection and scoring: at most one part-filled call each
     assert sum(size < CONFIG.max_batch for size in probes) <= 4
     assert len(probes) <= math.ceil(sum(probes) / CONFIG.max_batch) + 4
+
+
+def test_gradient_steps_back_propagate_chunk_by_chunk():
+    predictor = scene(4)  # 3 views x 6 adjusted candidates = 18 samples per adjust step
+    estimate_poses(predictor, images(4), CONFIG)
+    differentiated = [size for size, grad in predictor.calls if grad]
+    assert max(differentiated) == CONFIG.grad_batch < 18
+    assert predictor.pending_at_call == [0] * len(differentiated), \
+        "a differentiated chunk ran before the previous one was back-propagated"
+
+
+def test_chunked_gradients_give_the_same_poses():
+    whole = estimate_poses(scene(4), images(4), replace(CONFIG, grad_batch=64))
+    chunked = estimate_poses(scene(4), images(4), replace(CONFIG, grad_batch=5))
+    assert np.allclose(whole.rel_poses, chunked.rel_poses, atol=1e-5)
+    assert whole.backward_samples == chunked.backward_samples
 
 
 def test_progress_reports_every_stage_up_to_its_total():

@@ -108,11 +108,23 @@ class SolverContext:
             errors = self._errors(sample_ref, sample_tgt, sample_pose, t, noise)
         return errors.view(count, 2, batch).mean(dim=2).sum(dim=1).float().cpu()
 
-    def step_errors(self, ref: torch.Tensor, tgt: torch.Tensor, poses: torch.Tensor) -> torch.Tensor:
-        """Errors (K,) for one gradient step: fresh noise, t uniform in ``refine_t_range``; differentiable."""
+    def gradient_step(self, ref: torch.Tensor, tgt: torch.Tensor, poses: torch.Tensor) -> torch.Tensor:
+        """Errors (K,) of one gradient step, back-propagated into the leaves ``poses`` (K, 3) comes from.
+
+        Fresh noise, t uniform in ``refine_t_range``. Forward and backward run per ``grad_batch``
+        chunk and the gradients accumulate (the loss is a sum), so only one chunk's activations are
+        alive at a time. Returns the errors detached.
+        """
         low, high = self.refine_t
         t = torch.randint(low, high + 1, (len(ref),), generator=self.generator)
-        errors = self._errors(ref, tgt, poses, t, self.draw_noise(len(ref)))
-        self.backward_samples += len(errors)
-        return errors
-
+        noise = self.draw_noise(len(ref))
+        size = self.config.grad_batch
+        parts = []
+        for start in range(0, len(ref), size):
+            chunk = slice(start, start + size)
+            errors = self._errors(ref[chunk], tgt[chunk], poses[chunk], t[chunk], noise[chunk])
+            errors.sum().backward(retain_graph=start + size < len(ref))  # ``poses`` may share a graph
+            parts.append(errors.detach())
+            del errors
+        self.backward_samples += len(ref)
+        return torch.cat(parts)

@@ -45,10 +45,9 @@ def adjust(ctx: SolverContext, starts: torch.Tensor, views: torch.Tensor) -> tor
     anchor = torch.zeros_like(views)
     for step in range(ctx.config.adjust_steps):
         forward = step % 2 == 0
-        errors = ctx.step_errors(anchor if forward else views, views if forward else anchor,
-                                 pose if forward else invert(pose))
         optimiser.zero_grad()
-        errors.sum().backward()
+        ctx.gradient_step(anchor if forward else views, views if forward else anchor,
+                          pose if forward else invert(pose))
         optimiser.step()
     return pose.detach().cpu()
 

@@ -63,9 +63,8 @@ def refine(ctx: SolverContext, start: torch.Tensor, variant: str, steps_per_view
             first = poses[ref - 1].detach() if hold_ref else poses[ref - 1]
             second = poses[tgt - 1] if hold_ref else poses[tgt - 1].detach()
             pose = compose(invert(first), second)
-        error = ctx.step_errors(torch.tensor([ref]), torch.tensor([tgt]), pose[None])
         optimiser.zero_grad()
-        error.sum().backward()
+        ctx.gradient_step(torch.tensor([ref]), torch.tensor([tgt]), pose[None])
         optimiser.step()
         history[updated - 1].append(poses[updated - 1].detach().cpu().clone())
     return torch.stack([mean_pose(torch.stack(h[-config.average_last:])) if h else start[k].cpu()
