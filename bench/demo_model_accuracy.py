@@ -4,11 +4,11 @@
 Renders fresh bags with ``make_synthetic_bag`` (camera seed ``--seed``; training used its own
 random cameras): one per demo object (held-out views of the training objects) and one per unseen
 object (``random_urdfs`` blobs the model never saw). Runs ``evaluate_bag`` offline on each
-(``--n 2``, ``--samples`` picks, the solver preset given), and sums the pairs up per set beside the
-random-pose baseline that ``evaluate_bag`` scores on the same pairs. Prints the table and writes
-bench/results/demo_model_accuracy.json.
+(``--n 2``, ``--samples`` picks, the solver preset and model precision given), and sums the pairs up
+per set beside the random-pose baseline that ``evaluate_bag`` scores on the same pairs. Prints the
+table and writes bench/results/demo_model_accuracy.json (``_<precision>`` before ``.json`` unless float32).
 
-    python bench/demo_model_accuracy.py [--samples 4] [--unseen 6] [--preset default] [--threads 2]
+    python bench/demo_model_accuracy.py [--samples 4] [--unseen 6] [--preset default] [--precision bfloat16]
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def evaluate_set(object_set: str, names: list[str], args: argparse.Namespace, wo
             raise RuntimeError(f"make_synthetic_bag failed for {object_set}/{name}")
         report_dir = work / f"report_{object_set}_{name}"
         if evaluate_bag([str(bag), "--out", str(report_dir), "--n", "2", "--samples", str(args.samples),
-                         "--preset", args.preset, "--seed", str(args.seed)]):
+                         "--preset", args.preset, "--seed", str(args.seed), "--precision", args.precision]):
             raise RuntimeError(f"evaluate_bag failed on {bag}")
         reports.append(json.loads((report_dir / "report.json").read_text()))
         seconds += [estimate["seconds"] for estimate in reports[-1]["estimates"]]
@@ -57,9 +57,12 @@ def main() -> None:
     parser.add_argument("--unseen", type=int, default=6, help="unseen objects")
     parser.add_argument("--preset", choices=("default", "fast"), default="default")
     parser.add_argument("--seed", type=int, default=101, help="camera and pick seed of the fresh bags")
+    parser.add_argument("--precision", choices=("float32", "bfloat16"), default="float32")
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--out", type=Path)
     args = parser.parse_args()
+    if args.out is None:
+        args.out = OUT if args.precision == "float32" else OUT.with_name(f"{OUT.stem}_{args.precision}.json")
     torch.set_num_threads(args.threads)
     started = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="idpose_demo_accuracy_") as folder:

@@ -13,8 +13,8 @@ from bench.unit_costs import ISSUE_REFERENCE, RESULTS, STEP_COST_FILE
 
 README = Path(__file__).resolve().parent / "README.md"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
-STEP_KINDS = ("ours_step", "official_step", "ours_probe", "official_probe")
 PROJECTIONS = ("seconds", "cpu_seconds", "reference_seconds")
+PRESETS = ("default", "fast")
 
 
 def load(name: str) -> dict | None:
@@ -29,63 +29,105 @@ def duration(seconds: float) -> str:
 
 
 def step_cost_section(report: dict | None) -> list[str]:
-    """Item 1: measured seconds and peak memory per step and probe, and the ratios."""
+    """Item 1: measured seconds and peak memory per step and probe, and the ratios per precision."""
     if report is None:
         return ["### 1. One step and one probe, full-size model", "", "not run (`python bench/step_cost.py`)."]
-    median, ratio, machine = report["median"], report["ratio_official_over_ours"], report["machine"]
+    median, machine, setup = report["median"], report["machine"], report["setup"]
     official_parts = {part: seconds for part, seconds in report["runs"]["official_step"][0]["parts"].items()
                       if part not in ("total", "cpu")}
-    lines = ["### 1. One step and one probe, full-size model (random weights, float32, 256 px)", "",
+    lines = ["### 1. One step and one probe, full-size model (random weights, 256 px)", "",
              f"{machine['cpus']} CPUs, {machine['threads']} torch threads, torch {machine['torch']}, "
              f"{machine['platform']}; load average {machine['load_average_before'][0]:.1f} before, "
              f"{machine['load_average_after'][0]:.1f} after (the run's own threads count in it); medians of "
-             f"{report['setup']['alternations']} alternations.", "",
-             "| measurement | wall s | CPU s | peak GB |", "| --- | ---: | ---: | ---: |"]
-    lines += [f"| {kind} | {median[kind]['seconds']:.2f} | {median[kind]['cpu_seconds']:.2f} | "
-              f"{median[kind]['peak_gb']:.2f} |" for kind in STEP_KINDS]
+             f"{setup['alternations']} alternations. Official: float32; ours: `kind@precision`; "
+             f"ours_adjust = one solver adjust step over {setup['adjusted_candidates']} candidates in chunks of "
+             f"`grad_batch` {setup['grad_batch']}.", "",
+             "| measurement | wall s | CPU s | peak GB (with building) | peak GB while running | wall s per sample |",
+             "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for kind, figures in median.items():
+        per_sample = figures.get("per_sample_seconds")
+        lines.append(f"| {kind} | {figures['seconds']:.2f} | {figures['cpu_seconds']:.2f} | {figures['peak_gb']:.2f} | "
+                     f"{figures['run_peak_gb']:.2f} | " + (f"{per_sample:.2f}" if per_sample else "") + " |")
     lines += ["", "Official step split (first run, wall): " + ", ".join(f"{k} {v:.2f} s" for k, v in official_parts.items())
-              + ".", "",
-              f"**Per step the official path costs {ratio['step_seconds']:.2f}x our time "
-              f"({ratio['step_cpu_seconds']:.2f}x CPU time) and {ratio['step_peak_gb']:.2f}x our peak memory; "
-              f"per probe {ratio['probe_seconds']:.2f}x time, {ratio['probe_peak_gb']:.2f}x memory.**"]
+              + ".", ""]
+    for precision, ratio in report["ratio_official_over_ours"].items():
+        lines.append(f"**Ours in {precision}: per step the official path costs {ratio['step_seconds']:.2f}x our time "
+                     f"({ratio['step_cpu_seconds']:.2f}x CPU time) and {ratio['step_run_peak_gb']:.2f}x our memory while "
+                     f"running ({ratio['step_peak_gb']:.2f}x the peak with building); per probe "
+                     f"{ratio['probe_seconds']:.2f}x time, {ratio['probe_run_peak_gb']:.2f}x memory.**")
+    return lines
+
+
+def precision_section(fidelity: dict | None, accuracy: dict[str, dict | None]) -> list[str]:
+    """bfloat16 against float32: the same samples on the full-size architecture, and the demo model's accuracy."""
+    title = "### 1b. bfloat16 vs float32"
+    if fidelity is None:
+        return [title, "", "not run (`python bench/precision_fidelity.py`)."]
+    figures, setup = fidelity["bfloat16_vs_float32"], fidelity["setup"]
+    lines = [title, "", f"Full-size architecture, random weights, identical inputs ({setup['probe_batch']} probe samples "
+             f"at t = {setup['probe_t']}, {setup['steps']} single-sample steps): probe errors differ by at most "
+             f"{figures['probe_error_max_relative_difference']:.1e} (relative), step errors by "
+             f"{figures['step_error_max_relative_difference']:.1e}; pose gradients: cosine "
+             f">= {figures['gradient_cosine_min']:.4f} (median {figures['gradient_cosine_median']:.4f}), norm ratio "
+             f"{figures['gradient_norm_ratio_min']:.3f} .. {figures['gradient_norm_ratio_max']:.3f}; the best probe "
+             f"sample is {'the same' if figures['probe_best_sample_same'] else 'NOT the same'}."]
+    if all(accuracy.values()):
+        lines += ["", "Demo model on fresh bags (`bench/demo_model_accuracy.py`, same bags and pairs in both):", "",
+                  "| precision | set | pairs | RotAcc@15 | RotAcc@30 | mean rot. err. | s per estimate |",
+                  "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
+        for precision, report in accuracy.items():
+            for name, row in report["sets"].items():
+                model = row["model"]
+                lines.append(f"| {precision} | {name} | {model['pairs']} | {model['rot_acc_15']:.1%} | "
+                             f"{model['rot_acc_30']:.1%} | {model['mean_rot_err_deg']:.1f} deg | "
+                             f"{row['seconds_per_estimate']:.1f} |")
     return lines
 
 
 def counts_section(report: dict | None) -> list[str]:
-    """Item 2: samples per estimate and projected full-size time, ours vs official, wall and CPU."""
+    """Item 2: samples per estimate and projected full-size time, ours (per precision) vs official."""
     if report is None:
         return ["### 2. Samples per estimate", "", "not run (`python -m bench.sample_counts`)."]
-    projected = report["unit_costs"] is not None
     lines = ["### 2. Predictor samples per estimate and projected full-size time on this CPU", "",
-             "Samples: evaluated / of which differentiated. Time: wall / CPU time from item 1's unit costs / the "
-             "issue's quiet-machine figures (see below); (1/x) = the official time divided by ours.", "",
-             "| n | official samples | ours default | ours fast |"
-             + (" official time | ours default | ours fast |" if projected else ""),
-             "| ---: | ---: | ---: | ---: |" + (" ---: | ---: | ---: |" if projected else "")]
+             "Samples: evaluated / of which differentiated (of which batched adjust steps).", "",
+             "| n | official | ours default | ours fast |", "| ---: | ---: | ---: | ---: |"]
     for row in report["rows"]:
         official, ours = row["official"], row["ours"]
         cells = [f"{official['forward_samples']} / {official['backward_samples']}"]
-        cells += [f"{ours[p]['forward_samples']} / {ours[p]['backward_samples']}" for p in ("default", "fast")]
-        if projected:
-            cells.append(" / ".join(duration(official[f"projected_{m}"]) for m in PROJECTIONS))
-            cells += [" / ".join(f"{duration(ours[p][f'projected_{m}'])} (1/{speedup(row, p, m):.1f})"
-                                 for m in PROJECTIONS) for p in ("default", "fast")]
+        cells += [f"{ours[p]['forward_samples']} / {ours[p]['backward_samples']} ({ours[p]['adjust_samples']})"
+                  for p in PRESETS]
         lines.append(f"| {row['n']} | " + " | ".join(cells) + " |")
-    if projected:
-        wall, cpu = report["unit_costs"]["seconds"], report["unit_costs"]["cpu_seconds"]
-        lines += ["", "Unit costs, wall (CPU) seconds: " + ", ".join(
+    costs = report["unit_costs"]
+    if not costs:
+        return lines
+    precisions = list(costs)
+    lines += ["", "Projected time: wall / CPU time from item 1's unit costs / the issue's quiet-machine figures "
+              "(see below); (1/x) = the official time divided by ours.", "",
+              "| n | preset | official | " + " | ".join(f"ours {p}" for p in precisions) + " |",
+              "| ---: | --- | ---: | " + " | ".join("---:" for _ in precisions) + " |"]
+    for row in report["rows"]:
+        official = " / ".join(duration(row["official"]["projected"][m]) for m in PROJECTIONS)
+        for preset in PRESETS:
+            cells = [" / ".join(f"{duration(row['ours'][preset]['projected'][p][m])} (1/{speedup(row, preset, p, m):.1f})"
+                                for m in PROJECTIONS) for p in precisions]
+            lines.append(f"| {row['n']} | {preset} | {official} | " + " | ".join(cells) + " |")
+    for precision, units in costs.items():
+        wall, cpu = units["seconds"], units["cpu_seconds"]
+        lines += ["", f"Unit costs, ours in {precision}, wall (CPU) seconds: " + ", ".join(
             f"{label} {wall[key]:.2f} ({cpu[key]:.2f})" for label, key in (
-                ("ours step", "ours_step"), ("ours probe of 16", "ours_probe"),
-                ("encode per view", "encode_per_view"), ("official step", "official_step"),
-                ("official probe", "official_probe"))) + ". Quiet-machine figures (the issue's): " + ", ".join(
-            f"{key} {value} s" for key, value in ISSUE_REFERENCE.items()) + f", our probe of 16 scaled from our step by "
-            f"item 1's probe/step CPU ratio: {report['unit_costs']['reference_seconds']['ours_probe']:.2f} s."]
+                ("ours step", "ours_step"), ("ours adjust per sample", "ours_adjust_sample"),
+                ("ours probe of 16", "ours_probe"), ("encode per view", "encode_per_view"),
+                ("official step", "official_step"), ("official probe", "official_probe"))) + "."]
+    reference = costs[precisions[0]]["reference_seconds"]
+    lines += ["", "Quiet-machine figures (the issue's): " + ", ".join(f"{key} {value} s" for key, value in ISSUE_REFERENCE.items())
+              + "; our other units scaled from that float32 step by item 1's CPU-time ratios (e.g. "
+              f"{precisions[0]} probe of 16: {reference['ours_probe']:.2f} s)."]
     return lines
 
 
-def speedup(row: dict, preset: str, measure: str) -> float:
+def speedup(row: dict, preset: str, precision: str, measure: str) -> float:
     """Official projected time over ours for one row of sample_counts.json."""
-    return row["official"][f"projected_{measure}"] / row["ours"][preset][f"projected_{measure}"]
+    return row["official"]["projected"][measure] / row["ours"][preset]["projected"][precision][measure]
 
 
 def schedule_section(report: dict | None) -> list[str]:
@@ -133,27 +175,30 @@ def end_to_end_section(report: dict | None) -> list[str]:
 
 
 def targets_section(steps: dict | None, counts: dict | None, schedule: dict | None) -> list[str]:
-    """The issue's targets, checked against the figures above (yes / NO per way of costing)."""
+    """The issue's targets, checked against the figures above (yes / NO per way of costing and precision)."""
     lines = ["### Targets", "",
-             "| target | this run, wall | this run, CPU time | issue's quiet-machine figures |",
-             "| --- | --- | --- | --- |"]
-    if steps:
-        ratio = steps["ratio_official_over_ours"]
-        quiet = ISSUE_REFERENCE["official_step"] / ISSUE_REFERENCE["ours_step"]
-        lines.append("| per step >= 3x cheaper than the official path | "
-                     + " | ".join(check(value, 3) for value in (ratio["step_seconds"], ratio["step_cpu_seconds"], quiet))
-                     + " |")
-    if counts and counts["unit_costs"]:
+             "| target | ours in | this run, wall | this run, CPU time | issue's quiet-machine figures |",
+             "| --- | --- | --- | --- | --- |"]
+    costs = counts["unit_costs"] if counts else None
+    if steps and costs:
+        for precision, ratio in steps["ratio_official_over_ours"].items():
+            quiet = costs[precision]["reference_seconds"]
+            lines.append(f"| per step >= 3x cheaper than the official path | {precision} | " + " | ".join(
+                check(value, 3) for value in (ratio["step_seconds"], ratio["step_cpu_seconds"],
+                                              quiet["official_step"] / quiet["ours_step"])) + " |")
+    if costs:
         two = next(row for row in counts["rows"] if row["n"] == 2)
         for preset, bound in (("default", 5), ("fast", 20)):
-            lines.append(f"| n = 2 `{preset}` projected <= 1/{bound} of the official | " + " | ".join(
-                f"{duration(two['ours'][preset][f'projected_{m}'])} vs {duration(two['official'][f'projected_{m}'])}: "
-                + check(speedup(two, preset, m), bound, "1/") for m in PROJECTIONS) + " |")
+            for precision in costs:
+                lines.append(f"| n = 2 `{preset}` projected <= 1/{bound} of the official | {precision} | " + " | ".join(
+                    f"{duration(two['ours'][preset]['projected'][precision][m])} vs "
+                    f"{duration(two['official']['projected'][m])}: " + check(speedup(two, preset, precision, m), bound, "1/")
+                    for m in PROJECTIONS) + " |")
     if schedule:
         for n, results in sorted(schedule["results"].items()):
             default, fast = results["steps=600"], results["fast"]
             gap = 100 * max(default[k] - fast[k] for k in ("rot_acc_15", "rot_acc_30"))
-            lines.append(f"| `fast` oracle rotation accuracy within 2 points of default, n = {n} | "
+            lines.append(f"| `fast` oracle rotation accuracy within 2 points of default, n = {n} | (any) | "
                          f"@15 {fast['rot_acc_15']:.1%} vs {default['rot_acc_15']:.1%}, @30 {fast['rot_acc_30']:.1%} "
                          f"vs {default['rot_acc_30']:.1%}: {'yes' if gap <= 2 else 'NO'} | (same) | (same) |")
     return lines
@@ -166,36 +211,41 @@ def check(value: float, bound: float, prefix: str = "") -> str:
 
 
 def closing_note(steps: dict | None, counts: dict | None, schedule: dict | None, end_to_end: dict | None) -> list[str]:
-    """The headline ratios in one paragraph."""
+    """The headline ratios in one paragraph per precision."""
     if not (steps and counts and counts["unit_costs"] and schedule):
         return ["### Closing note", "", "Incomplete: run `python bench/run_all.py`."]
-    ratio = steps["ratio_official_over_ours"]
     two = next(row for row in counts["rows"] if row["n"] == 2)
     fast = {n: results["fast"]["rot_acc_15"] for n, results in schedule["results"].items()}
     default = {n: results["steps=600"]["rot_acc_15"] for n, results in schedule["results"].items()}
-    quiet = ISSUE_REFERENCE["official_step"] / ISSUE_REFERENCE["ours_step"]
-    text = (f"Per step the official path costs {ratio['step_seconds']:.2f}x our wall time and "
-            f"{ratio['step_cpu_seconds']:.2f}x our CPU time in this run (1-minute load average "
-            f"{steps['machine']['load_average_before'][0]:.1f} before it on {steps['machine']['cpus']} cores), against "
-            f"{quiet:.2f}x in the issue's quiet-machine figures, and {ratio['step_peak_gb']:.2f}x our peak memory. "
-            f"A two-view estimate with the paper's schedule is projected at 1/{speedup(two, 'default', 'seconds'):.1f} "
-            f"of the official time from this run's wall times (1/{speedup(two, 'default', 'cpu_seconds'):.1f} from CPU "
-            f"times, 1/{speedup(two, 'default', 'reference_seconds'):.1f} from the quiet-machine figures); the `fast` "
-            f"preset at 1/{speedup(two, 'fast', 'seconds'):.1f} (1/{speedup(two, 'fast', 'cpu_seconds'):.1f}, "
-            f"1/{speedup(two, 'fast', 'reference_seconds'):.1f}), with oracle RotAcc@15 "
-            + ", ".join(f"{fast[n]:.0%} vs {default[n]:.0%} (n = {n})" for n in sorted(fast)) + ".")
+    parts = [f"Measured with a 1-minute load average of {steps['machine']['load_average_before'][0]:.1f} before the "
+             f"run on {steps['machine']['cpus']} cores; the official path in float32."]
+    for precision, ratio in steps["ratio_official_over_ours"].items():
+        projected = lambda preset, m: speedup(two, preset, precision, m)  # noqa: E731
+        parts.append(
+            f"Ours in {precision}: per step the official path costs {ratio['step_seconds']:.2f}x our wall time "
+            f"({ratio['step_cpu_seconds']:.2f}x CPU time) and {ratio['step_run_peak_gb']:.2f}x our memory; a two-view "
+            f"estimate with the paper's schedule is projected at 1/{projected('default', 'seconds'):.1f} of the official "
+            f"time (1/{projected('default', 'cpu_seconds'):.1f} from CPU times, "
+            f"1/{projected('default', 'reference_seconds'):.1f} from the quiet-machine figures), the `fast` preset at "
+            f"1/{projected('fast', 'seconds'):.1f} (1/{projected('fast', 'cpu_seconds'):.1f}, "
+            f"1/{projected('fast', 'reference_seconds'):.1f}).")
+    parts.append("`fast` keeps oracle RotAcc@15 " + ", ".join(
+        f"{fast[n]:.0%} vs {default[n]:.0%} (n = {n})" for n in sorted(fast)) + ".")
     if end_to_end and end_to_end.get("status") == "measured":
-        text += (" End to end, the demo model takes " + ", ".join(
+        parts.append("End to end, the demo model takes " + ", ".join(
             f"{row['median_seconds']:.0f} s (n = {row['n']}, {row['preset']})" for row in end_to_end["rows"])
-                 + " per estimate on one thread.")
-    return ["### Closing note", "", text]
+                     + " per estimate on one thread.")
+    return ["### Closing note", "", " ".join(parts)]
 
 
 def render() -> str:
     """The whole generated block."""
     steps, counts, schedule = load(STEP_COST_FILE.name), load("sample_counts.json"), load("oracle_schedule.json")
     end_to_end = load("end_to_end.json")
-    sections = [step_cost_section(steps), counts_section(counts), schedule_section(schedule),
+    accuracy = {precision: load(f"demo_model_accuracy{suffix}.json")
+                for precision, suffix in (("float32", ""), ("bfloat16", "_bfloat16"))}
+    sections = [step_cost_section(steps), precision_section(load("precision_fidelity.json"), accuracy),
+                counts_section(counts), schedule_section(schedule),
                 end_to_end_section(end_to_end), targets_section(steps, counts, schedule),
                 closing_note(steps, counts, schedule, end_to_end)]
     return "\n\n".join("\n".join(section) for section in sections)

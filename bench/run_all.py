@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 STEP_COST_JSON = ROOT / "bench" / "results" / "step_cost.json"
 BENCHMARKS = (
     ("1. step and probe cost, ours vs official (full-size model)", ["bench/step_cost.py"]),
+    ("1b. bfloat16 vs float32 on the same samples (full-size model)", ["bench/precision_fidelity.py"]),
     ("2. samples per estimate and projected time", ["-m", "bench.sample_counts"]),
     ("3. accuracy vs schedule on the render oracle", ["-m", "bench.oracle_schedule"]),
     ("4. end to end with the demo model", ["-m", "bench.end_to_end"]),

@@ -3,10 +3,12 @@
 Ours: ``estimate_poses`` run with the render oracle as a cheap predictor at the full iteration counts
 of each preset; the counts do not depend on the predictor. Official: ``bench/official_counts.py``
 (derived from its published algorithm). With ``bench/results/step_cost.json`` present, both are
-projected to full-size seconds on this CPU (``bench/unit_costs.py``): wall and CPU seconds of that
-run, and the issue's quiet-machine reference figures (``ISSUE_REFERENCE``).
+projected to full-size seconds on this CPU (``bench/unit_costs.py``), ours in each precision that run
+measured: wall and CPU seconds of that run, and the issue's quiet-machine reference figures
+(``ISSUE_REFERENCE``).
 
 Usage (from the repository root): python -m bench.sample_counts [--views 2 4 6 8] [--presets default fast]
+       [--precisions float32 bfloat16]
 Writes bench/results/sample_counts.json.
 """
 from __future__ import annotations
@@ -20,7 +22,7 @@ import torch
 
 from bench.official_counts import OfficialSchedule, official_counts
 from bench.solver_oracle import RENDER_SIZE, scene_cameras
-from bench.unit_costs import MEASURES, RESULTS, UnitCosts, reference_costs
+from bench.unit_costs import RESULTS, all_costs
 from idpose_core.solver import SolverConfig, estimate_poses
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOracle
 from idpose_core.synthetic.scenes import oracle_objects
@@ -35,19 +37,20 @@ def our_counts(count: int, preset: str) -> dict:
     images = torch.zeros(count, 3, RENDER_SIZE, RENDER_SIZE)
     result = estimate_poses(oracle, images, SolverConfig.preset(preset, **ORACLE_RATES))
     return {"forward_samples": result.forward_samples, "backward_samples": result.backward_samples,
-            "oracle_stage_seconds": result.stage_seconds}
+            "adjust_samples": result.stage_samples["exploration"][1], "oracle_stage_seconds": result.stage_seconds}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", nargs="+", type=int, default=[2, 4, 6, 8])
     parser.add_argument("--presets", nargs="+", default=["default", "fast"])
+    parser.add_argument("--precisions", nargs="+", default=["float32", "bfloat16"],
+                        help="our precisions to project (each must be in step_cost.json)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     try:
-        costs = {measure: UnitCosts.load(measure=measure) for measure in MEASURES}
-        costs["reference_seconds"] = reference_costs(costs["cpu_seconds"])
-    except FileNotFoundError as missing:
+        costs = all_costs(args.precisions)
+    except (FileNotFoundError, KeyError) as missing:
         costs = {}
         print(f"no projections: {missing}")
 
@@ -55,21 +58,25 @@ def main() -> None:
     for count in args.views:
         official = official_counts(count)
         row = {"n": count, "official": official, "ours": {}}
-        for measure, unit in costs.items():
-            official[f"projected_{measure}"] = unit.official_seconds(official["probes"], official["steps"])
+        if costs:
+            official["projected"] = {measure: unit.official_seconds(official["probes"], official["steps"])
+                                     for measure, unit in next(iter(costs.values())).items()}
         for preset in args.presets:
             start = time.perf_counter()
             ours = our_counts(count, preset)
-            for measure, unit in costs.items():
-                ours[f"projected_{measure}"] = unit.ours_seconds(count, ours["forward_samples"], ours["backward_samples"])
+            ours["projected"] = {
+                precision: {measure: unit.ours_seconds(count, ours["forward_samples"], ours["backward_samples"],
+                                                       ours["adjust_samples"]) for measure, unit in units.items()}
+                for precision, units in costs.items()}
             row["ours"][preset] = ours
             print(f"n={count} {preset:<8} forward {ours['forward_samples']:>6} backward {ours['backward_samples']:>6}"
-                  + (f"  projected {ours['projected_seconds'] / 60:7.1f} min wall, "
-                     f"{ours['projected_cpu_seconds'] / 60:7.1f} min CPU" if costs else "")
+                  f" (adjust {ours['adjust_samples']})" + "".join(
+                      f"  {precision}: {seconds['seconds'] / 60:.1f} min wall, {seconds['cpu_seconds'] / 60:.1f} min CPU"
+                      for precision, seconds in ours["projected"].items())
                   + f"   (oracle run {time.perf_counter() - start:.1f} s)", flush=True)
         print(f"n={count} official forward {official['forward_samples']:>6} backward {official['backward_samples']:>6}"
-              + (f"  projected {official['projected_seconds'] / 60:7.1f} min wall, "
-                 f"{official['projected_cpu_seconds'] / 60:7.1f} min CPU" if costs else "")
+              + (f"  {official['projected']['seconds'] / 60:.1f} min wall, "
+                 f"{official['projected']['cpu_seconds'] / 60:.1f} min CPU" if costs else "")
               + f"   ({official['probes']} probes of {OfficialSchedule().probe_batch}, {official['steps']} steps)",
               flush=True)
         rows.append(row)
@@ -78,7 +85,8 @@ def main() -> None:
         "presets": {preset: SolverConfig.preset(preset).as_dict() for preset in args.presets},
         "oracle_learning_rates": ORACLE_RATES,
         "official_schedule": asdict(OfficialSchedule()),
-        "unit_costs": {measure: asdict(unit) for measure, unit in costs.items()} or None,
+        "unit_costs": {precision: {measure: asdict(unit) for measure, unit in units.items()}
+                       for precision, units in costs.items()} or None,
         "rows": rows,
     }
     RESULTS.mkdir(parents=True, exist_ok=True)

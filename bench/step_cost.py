@@ -1,8 +1,12 @@
 """What one ID-Pose step costs on this CPU: this project's way vs the official implementation's way.
 
 Full-size Zero-1-to-3 architecture with random weights (the cost does not depend on the values),
-float32, 256 px images. Each measurement runs in its own subprocess, so its peak memory
-(``ru_maxrss``: weights + activations + gradients) is its own; the kinds alternate in one run.
+256 px images. The official way runs in float32, as its code does; ours in each of ``--precisions``
+(``load_predictor``'s precision: the UNet in that dtype; VAE, CLIP and cc_projection in float32). Each
+measurement runs in its own subprocess, so its peak memory is its own: ``peak_gb`` over the whole
+process (``ru_maxrss``, including building the model: a bfloat16 model is built in float32 first),
+``run_peak_gb`` from the end of building to the end of the measurement (Linux VmHWM, reset in between:
+weights + cached views + activations + gradients). The kinds alternate in one run.
 
 What is measured (one "step" = what the solvers do per refinement iteration):
 - ours_step: the solver's refinement step. Views were encoded once beforehand (VAE + CLIP, not
@@ -12,6 +16,9 @@ What is measured (one "step" = what the solvers do per refinement iteration):
   (mode) and the target (sample x 0.18215) and CLIP-encode the reference again, then the UNet
   forward + backward with weight gradients enabled on the UNet and cc_projection and gradient
   checkpointing on the UNet; an EMA copy of the UNet is held in memory as the LDM model object does.
+- ours_adjust: one step of the exploration's candidate adjustment as the solver runs it for n = 2
+  (``exploration.adjust``, 20 candidates, default ``grad_batch``): seconds per differentiated sample
+  in ``parts["per_sample"]``; the solver's adjust steps cost this, not a batch-1 step.
 - ours_probe / official_probe: one exploration probe = one pose candidate in one direction under
   16 noise samples at t = 200, forward only (no grad) - ours from cached views, official
   re-encoding 16 reference + 16 target images through the VAE and 16 references through CLIP.
@@ -20,6 +27,7 @@ Wall seconds and process CPU seconds (all threads) are both kept: on a shared ma
 time is the steadier figure; each measurement also records the 1-minute load average.
 
 Usage: python bench/step_cost.py [--alternations 2] [--repeats 2] [--threads 2] [--config full|tiny]
+       [--precisions float32 bfloat16]
 Writes bench/results/step_cost.json and prints the figures and the ratios.
 """
 from __future__ import annotations
@@ -40,9 +48,15 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from idpose_core.model_loading import PRECISIONS  # noqa: E402
+from idpose_core.solver import SolverConfig  # noqa: E402
+from idpose_core.solver.context import SolverContext  # noqa: E402
+from idpose_core.solver.exploration import adjust  # noqa: E402
 from idpose_core.zero123 import Zero123Config, Zero123Predictor  # noqa: E402
 
-KINDS = ("ours_step", "official_step", "ours_probe", "official_probe")
+OFFICIAL_KINDS = ("official_step", "official_probe")
+OURS_KINDS = ("ours_step", "ours_adjust", "ours_probe")
+ADJUSTED_CANDIDATES = 20  # the better half of the 8 x 5 grid, one non-anchor view
 PROBE_BATCH = 16
 PROBE_T = 200
 REFINE_T = (200, 210)
@@ -53,17 +67,19 @@ def main() -> None:
     if args.child:
         print("RESULT " + json.dumps(measure(args.child, args)), flush=True)
         return
-    runs = {kind: [] for kind in KINDS}
+    kinds = measured_kinds(args.precisions)
+    runs = {kind: [] for kind in kinds}
     load_before = os.getloadavg()
-    total = args.alternations * len(KINDS)
+    total = args.alternations * len(kinds)
     for alternation in range(args.alternations):
-        for kind in KINDS:
-            done = alternation * len(KINDS) + KINDS.index(kind)
+        for kind in kinds:
+            done = alternation * len(kinds) + kinds.index(kind)
             print(f"[{100 * done // total:3d}%] alternation {alternation + 1}/{args.alternations}: {kind} ...", flush=True)
             result = run_child(kind, args)
             runs[kind].append(result)
             print(f"       {kind}: {result['seconds']:.2f} s ({result['cpu_seconds']:.2f} CPU s), peak "
-                  f"{result['peak_gb']:.2f} GB (after building {result['built_gb']:.2f} GB), "
+                  f"{result['peak_gb']:.2f} GB (after building {result['built_gb']:.2f} GB; while running "
+                  f"{result['run_peak_gb']:.2f} GB), "
                   f"load {result['load_average']:.1f}", flush=True)
     report = summarise(runs, args, load_before)
     print_summary(report)
@@ -73,6 +89,11 @@ def main() -> None:
     print(f"wrote {out}")
 
 
+def measured_kinds(precisions: list[str]) -> list[str]:
+    """The official kinds, then ours in every precision: ``ours_step@bfloat16`` etc."""
+    return [*OFFICIAL_KINDS, *(f"{kind}@{precision}" for precision in precisions for kind in OURS_KINDS)]
+
+
 def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--alternations", type=int, default=2, help="rounds of the four kinds, interleaved")
@@ -80,8 +101,10 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--size", type=int, default=256, help="image side in pixels")
     parser.add_argument("--config", choices=("full", "tiny"), default="full", help="tiny: smoke test only")
+    parser.add_argument("--precisions", nargs="+", choices=("float32", "bfloat16"), default=["float32", "bfloat16"],
+                        help="our side's precisions (the official way runs in float32)")
     parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "step_cost.json"))
-    parser.add_argument("--child", choices=KINDS, help=argparse.SUPPRESS)
+    parser.add_argument("--child", help=argparse.SUPPRESS)
     return parser.parse_args()
 
 
@@ -100,32 +123,34 @@ def run_child(kind: str, args: argparse.Namespace) -> dict:
 def measure(kind: str, args: argparse.Namespace) -> dict:
     """Build the model, then time ``kind``; returns seconds and memory of this process."""
     torch.set_num_threads(args.threads)
+    kind, _, precision = kind.partition("@")
     config = Zero123Config.full() if args.config == "full" else Zero123Config.tiny()
-    predictor = Zero123Predictor.random(config, seed=0, device="cpu", dtype=torch.float32)
+    predictor = Zero123Predictor.random(config, seed=0, device="cpu", dtype=PRECISIONS[precision or "float32"])
     generator = torch.Generator().manual_seed(0)
     images = torch.rand(2, 3, args.size, args.size, generator=generator) * 2 - 1
     official = kind.startswith("official")
     if official:
         ema = prepare_official(predictor)
-    built_gb = current_rss_gb()
-    if kind == "ours_step":
-        views = predictor.encode(images)
-        run = lambda: ours_step(predictor, views, generator)  # noqa: E731
-    elif kind == "official_step":
-        run = lambda: official_step(predictor, images, generator)  # noqa: E731
-    elif kind == "ours_probe":
-        views = predictor.encode(images)
-        run = lambda: ours_probe(predictor, views, generator)  # noqa: E731
     else:
-        run = lambda: official_probe(predictor, images, generator)  # noqa: E731
+        views = predictor.encode(images)
+    built_gb = current_rss_gb()
+    reset_peak_rss()
+    run = {
+        "ours_step": lambda: ours_step(predictor, views, generator),
+        "ours_adjust": lambda: ours_adjust(predictor, views),
+        "ours_probe": lambda: ours_probe(predictor, views, generator),
+        "official_step": lambda: official_step(predictor, images, generator),
+        "official_probe": lambda: official_probe(predictor, images, generator),
+    }[kind]
     timings = []
     repeats = args.repeats if kind.endswith("step") else 1
-    if kind.endswith("step"):
+    if kind.endswith(("step", "adjust")):
         run()  # warm-up
     for _ in range(repeats):
         cpu_start = time.process_time()
         timings.append(run())
         timings[-1]["cpu"] = time.process_time() - cpu_start
+    run_peak_gb = peak_rss_since_reset_gb()
     result = {
         "seconds": statistics.mean(t["total"] for t in timings),
         "cpu_seconds": statistics.mean(t["cpu"] for t in timings),
@@ -133,7 +158,8 @@ def measure(kind: str, args: argparse.Namespace) -> dict:
         "parts": {part: statistics.mean(t[part] for t in timings) for part in timings[0]},
         "repeats": repeats,
         "built_gb": built_gb,
-        "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2,
+        "run_peak_gb": run_peak_gb,
+        "peak_gb": max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2, run_peak_gb),
     }
     if official:
         result["ema_parameters"] = sum(p.numel() for p in ema.parameters())
@@ -157,6 +183,17 @@ def ours_step(predictor, views, generator) -> dict:
     noise = torch.randn(1, *views.noise_shape, generator=generator)
     predictor.noise_error(views, torch.tensor([0]), torch.tensor([1]), pose, t, noise).sum().backward()
     return {"total": time.perf_counter() - start}
+
+
+def ours_adjust(predictor, views) -> dict:
+    """One adjust step of the solver's exploration: 20 candidates, forward direction, chunks of grad_batch."""
+    config = SolverConfig(adjust_steps=1)
+    context = SolverContext(predictor, views, config)
+    starts = torch.tensor([[0.2, 0.3 * k, 0.0] for k in range(ADJUSTED_CANDIDATES)])
+    start = time.perf_counter()
+    adjust(context, starts, torch.ones(ADJUSTED_CANDIDATES, dtype=torch.long))
+    total = time.perf_counter() - start
+    return {"total": total, "per_sample": total / context.backward_samples}
 
 
 def official_encode(predictor, ref_images, tgt_images, generator):
@@ -212,6 +249,17 @@ def official_probe(predictor, images, generator) -> dict:
     return {"total": end - start, "encode": encoded - start, "unet_forward": end - encoded}
 
 
+def reset_peak_rss() -> None:
+    """Restart the kernel's peak-RSS count (VmHWM), so the run's peak is seen apart from building the model."""
+    Path("/proc/self/clear_refs").write_text("5")
+
+
+def peak_rss_since_reset_gb() -> float:
+    """Peak resident memory since ``reset_peak_rss`` (Linux /proc VmHWM), in GiB."""
+    line = next(line for line in Path("/proc/self/status").read_text().splitlines() if line.startswith("VmHWM:"))
+    return int(line.split()[1]) / 1024**2
+
+
 def current_rss_gb() -> float:
     """Resident memory now (Linux /proc), in GiB."""
     pages = int(Path("/proc/self/statm").read_text().split()[1])
@@ -219,21 +267,27 @@ def current_rss_gb() -> float:
 
 
 def summarise(runs: dict, args: argparse.Namespace, load_before: tuple) -> dict:
-    """Medians per kind, the official/ours ratios, and the machine the figures come from."""
-    units = ("seconds", "cpu_seconds", "peak_gb")
+    """Medians per kind, the official/ours ratios per precision, and the machine the figures come from."""
+    units = ("seconds", "cpu_seconds", "peak_gb", "run_peak_gb")
     median = {kind: {unit: statistics.median(r[unit] for r in results) for unit in units}
               for kind, results in runs.items()}
+    for kind, results in runs.items():
+        if kind.startswith("ours_adjust"):
+            median[kind]["per_sample_seconds"] = statistics.median(r["parts"]["per_sample"] for r in results)
     ratios = {
-        f"{what}_{unit}": median[f"official_{what}"][unit] / median[f"ours_{what}"][unit]
-        for what in ("step", "probe") for unit in units
+        precision: {f"{what}_{unit}": median[f"official_{what}"][unit] / median[f"ours_{what}@{precision}"][unit]
+                    for what in ("step", "probe") for unit in units}
+        for precision in args.precisions
     }
     return {
         "machine": {"cpus": os.cpu_count(), "threads": args.threads, "platform": platform.platform(),
                     "torch": torch.__version__, "load_average_before": load_before,
                     "load_average_after": os.getloadavg()},
-        "setup": {"config": args.config, "image_size": args.size, "dtype": "float32", "weights": "random",
-                  "alternations": args.alternations, "repeats_per_step_measurement": args.repeats,
-                  "probe_batch": PROBE_BATCH, "definitions": __doc__.split("What is measured")[1].split("Usage:")[0]},
+        "setup": {"config": args.config, "image_size": args.size, "official_dtype": "float32",
+                  "precisions": args.precisions, "weights": "random", "alternations": args.alternations,
+                  "repeats_per_step_measurement": args.repeats, "probe_batch": PROBE_BATCH,
+                  "adjusted_candidates": ADJUSTED_CANDIDATES, "grad_batch": SolverConfig().grad_batch,
+                  "definitions": __doc__.split("What is measured")[1].split("Usage:")[0]},
         "runs": runs,
         "median": median,
         "ratio_official_over_ours": ratios,
@@ -241,15 +295,19 @@ def summarise(runs: dict, args: argparse.Namespace, load_before: tuple) -> dict:
 
 
 def print_summary(report: dict) -> None:
-    median, ratio = report["median"], report["ratio_official_over_ours"]
-    print(f"\n{'kind':<16}{'seconds':>10}{'CPU s':>10}{'peak GB':>10}")
+    median = report["median"]
+    print(f"\n{'kind':<24}{'seconds':>10}{'CPU s':>10}{'peak GB':>10}{'run GB':>10}")
     for kind, figures in median.items():
-        print(f"{kind:<16}{figures['seconds']:>10.2f}{figures['cpu_seconds']:>10.2f}{figures['peak_gb']:>10.2f}")
+        extra = f"  ({figures['per_sample_seconds']:.2f} s per sample)" if "per_sample_seconds" in figures else ""
+        print(f"{kind:<24}{figures['seconds']:>10.2f}{figures['cpu_seconds']:>10.2f}{figures['peak_gb']:>10.2f}"
+              f"{figures['run_peak_gb']:>10.2f}{extra}")
     official_parts = report["runs"]["official_step"][0]["parts"]
     print("official step split (first run): " + ", ".join(f"{k} {v:.2f} s" for k, v in official_parts.items()))
-    for what in ("step", "probe"):
-        print(f"{what + ':':<7}official / ours = {ratio[what + '_seconds']:.2f}x time "
-              f"({ratio[what + '_cpu_seconds']:.2f}x CPU time), {ratio[what + '_peak_gb']:.2f}x peak memory")
+    for precision, ratio in report["ratio_official_over_ours"].items():
+        for what in ("step", "probe"):
+            print(f"{what} vs ours in {precision}: official / ours = {ratio[what + '_seconds']:.2f}x time "
+                  f"({ratio[what + '_cpu_seconds']:.2f}x CPU time), {ratio[what + '_peak_gb']:.2f}x peak memory "
+                  f"({ratio[what + '_run_peak_gb']:.2f}x while running)")
     load = report["machine"]
     print(f"load average before {load['load_average_before']}, after {load['load_average_after']} "
           f"({load['cpus']} CPUs, {load['threads']} threads)")

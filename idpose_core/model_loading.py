@@ -11,7 +11,7 @@ from idpose_core.demo_model import predictor as demo_predictor
 from idpose_core.demo_model.model import WEIGHTS_FILE
 from idpose_core.predictor import NoisePredictor
 from idpose_core.zero123 import ModelLoadError, Zero123Predictor
-from idpose_core.zero123.predictor import resolve_device
+from idpose_core.zero123.predictor import resolve_device, resolve_dtype
 
 PRECISIONS = {"auto": None, "float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth", ".safetensors")
@@ -20,15 +20,20 @@ CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth", ".safetensors")
 def load_predictor(model_path: str, device: str = "auto", precision: str = "auto") -> NoisePredictor:
     """A diffusers-layout Zero-1-to-3 folder or an original LDM checkpoint file -> predictor.
 
-    An empty ``model_path`` loads the embedded demo model (``idpose_core/assets/demo_model``, float32)
-    with a loud warning: it only knows the demo objects; real objects need Zero-1-to-3. Where the
+    An empty ``model_path`` loads the embedded demo model (``idpose_core/assets/demo_model``) with a
+    loud warning: it only knows the demo objects; real objects need Zero-1-to-3. Where the
     package carries no demo weights, an empty path is a ``ModelLoadError``.
 
     ``precision``: "auto" (float32 on CPU, bfloat16/float16 on CUDA), "float32", "float16",
-    "bfloat16". Raises ``ModelLoadError`` naming the path, the problem and what to download.
+    "bfloat16" (on CPUs with native bfloat16, e.g. avx512_bf16 or AMX, about twice as fast as float32:
+    ``bench/README.md``). Raises ``ModelLoadError`` naming the path, the problem and what to download.
     """
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {sorted(PRECISIONS)}, got {precision!r}")
+    if precision == "float16" and resolve_device(device).type == "cpu":
+        logging.getLogger(__name__).warning(
+            "precision float16 on the CPU: PyTorch has no fast float16 CPU kernels, an estimate will be far slower "
+            "than in float32; use bfloat16 (CPUs with avx512_bf16 or AMX) or float32")
     if not str(model_path).strip():
         folder = demo_predictor.EMBEDDED_MODEL_DIR
         if not (folder / WEIGHTS_FILE).is_file():
@@ -38,7 +43,8 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
             "model_path is empty: using the EMBEDDED DEMO MODEL (%s), a small diffusion model trained only on "
             "the synthetic demo objects. It is a demonstration: poses of real objects need Zero-1-to-3 weights "
             "(set model_path).", folder)
-        return DemoPredictor.from_pretrained(folder, resolve_device(device))
+        device = resolve_device(device)
+        return DemoPredictor.from_pretrained(folder, device, resolve_dtype(PRECISIONS[precision], device))
     path = Path(model_path).expanduser()
     if path.is_dir():
         return Zero123Predictor.from_pretrained(path, device=device, dtype=PRECISIONS[precision])

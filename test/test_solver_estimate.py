@@ -74,6 +74,10 @@ def test_result_has_the_promised_shapes_and_counts():
     refine_and_polish = (CONFIG.refine_steps_per_view + CONFIG.runner_up_steps) * 2
     adjusted = 2 * (len(CONFIG.polar_candidates_deg) * CONFIG.azimuth_candidates // 2)
     assert result.backward_samples == refine_and_polish + CONFIG.adjust_steps * adjusted
+    assert result.stage_samples["exploration"][1] == CONFIG.adjust_steps * adjusted
+    assert result.stage_samples["refinement"][1] == CONFIG.refine_steps_per_view * 2
+    assert sum(f for f, _ in result.stage_samples.values()) == result.forward_samples
+    assert sum(b for _, b in result.stage_samples.values()) == result.backward_samples
 
 
 def test_probes_fill_batches_up_to_max_batch():

@@ -72,13 +72,19 @@ class DemoDiffusionModel(nn.Module):
 
     def model_output(self, noisy: torch.Tensor, reference: torch.Tensor, embedding: torch.Tensor,
                      pose: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        """The UNet's raw output (B, 3, r, r): noise or clean target, as ``config.prediction_type`` says."""
-        token = self.cc_projection(torch.cat([embedding, pose_features(pose).to(embedding.dtype)], -1))
-        if self.view_head is not None:
-            pose = compose(self.reference_view(embedding), pose)
-        class_input = fourier_pose_features(pose).to(noisy.dtype)
-        if self.config.token_in_timestep_embedding:
-            class_input = torch.cat([class_input, token], -1)
+        """The UNet's raw output (B, 3, r, r): noise or clean target, as ``config.prediction_type`` says.
+
+        The pose path (view head, composition, features, cc_projection) runs in float32 even under a
+        reduced-precision autocast: bfloat16 there flipped answers that float32 got right.
+        """
+        with torch.autocast(noisy.device.type, enabled=False):
+            embedding = embedding.float()
+            token = self.cc_projection(torch.cat([embedding, pose_features(pose).to(embedding.dtype)], -1))
+            if self.view_head is not None:
+                pose = compose(self.reference_view(embedding), pose)
+            class_input = fourier_pose_features(pose).to(embedding.dtype)
+            if self.config.token_in_timestep_embedding:
+                class_input = torch.cat([class_input, token], -1)
         return self.unet(torch.cat([noisy, reference], 1), t, encoder_hidden_states=token[:, None],
                          class_labels=class_input).sample
 

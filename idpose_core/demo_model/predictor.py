@@ -18,28 +18,36 @@ class DemoPredictor:
 
     ``encode`` downsamples preprocessed views (N, 3, H, W) in [-1, 1] to the model resolution: the
     clean targets become ``Views.latents`` (pixel space, no VAE) and the references' CLIP embeddings
-    and images go into ``Views.conditioning``.
+    and images go into ``Views.conditioning``. Weights stay float32; with another ``dtype`` only the UNet
+    runs under autocast (bfloat16 on CPUs with native support): the encoder (once per view) and the
+    pose path stay float32, and so do the errors.
     """
 
-    def __init__(self, model: DemoDiffusionModel, solver_defaults: dict | None = None):
+    def __init__(self, model: DemoDiffusionModel, solver_defaults: dict | None = None,
+                 dtype: torch.dtype = torch.float32):
         """``solver_defaults``: ``SolverConfig`` overrides recommended for this model (its probe timesteps)."""
         self.model = model.eval().requires_grad_(False)
         self.num_train_timesteps = int(model.config.num_train_timesteps)
         self.solver_defaults = dict(solver_defaults or {})
+        self.dtype = dtype
 
     @classmethod
-    def from_pretrained(cls, folder: Path | str, device: str | torch.device = "cpu") -> DemoPredictor:
+    def from_pretrained(cls, folder: Path | str, device: str | torch.device = "cpu",
+                        dtype: torch.dtype = torch.float32) -> DemoPredictor:
         """Load a model folder (``config.json``, ``model.safetensors``, optional ``solver_defaults.json``)."""
         folder = Path(folder)
         defaults_path = folder / SOLVER_DEFAULTS_FILE
         defaults = json.loads(defaults_path.read_text()) if defaults_path.is_file() else {}
         defaults = {key: tuple(value) if isinstance(value, list) else value for key, value in defaults.items()}
-        return cls(DemoDiffusionModel.from_pretrained(folder).to(device), defaults)
+        return cls(DemoDiffusionModel.from_pretrained(folder).to(device), defaults, dtype)
 
     @classmethod
-    def embedded(cls, device: str | torch.device = "cpu") -> DemoPredictor:
+    def embedded(cls, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32) -> DemoPredictor:
         """The demo model shipped inside the package (``idpose_core/assets/demo_model``)."""
-        return cls.from_pretrained(EMBEDDED_MODEL_DIR, device)
+        return cls.from_pretrained(EMBEDDED_MODEL_DIR, device, dtype)
+
+    def _autocast(self):
+        return torch.autocast(self.device.type, dtype=self.dtype, enabled=self.dtype != torch.float32)
 
     @property
     def device(self) -> torch.device:
@@ -60,7 +68,8 @@ class DemoPredictor:
         ref, tgt, t = ref.to(device), tgt.to(device), t.to(device)
         noise = noise.to(device, torch.float32)
         noisy = self.model.add_noise(views.latents[tgt], noise, t)
-        predicted = self.model.predict_noise(noisy, views.conditioning["image"][ref],
-                                             views.conditioning["embedding"][ref],
-                                             pose.to(device, torch.float32), t)
-        return (predicted - noise).pow(2).flatten(1).mean(1)
+        with self._autocast():
+            predicted = self.model.predict_noise(noisy, views.conditioning["image"][ref],
+                                                 views.conditioning["embedding"][ref],
+                                                 pose.to(device, torch.float32), t)
+        return (predicted.float() - noise).pow(2).flatten(1).mean(1)

@@ -36,6 +36,7 @@ class SolverContext:
         self.probe_noise = self.draw_noise(config.probe_batch)
         self.forward_samples = 0
         self.backward_samples = 0
+        self.stage_samples: dict[str, list[int]] = {}  # stage -> [evaluated, differentiated]
         self._progress = progress
         self._cancel = cancel
         self._stage, self._done, self._total = "", 0, 0
@@ -79,6 +80,7 @@ class SolverContext:
             parts.append(self.predictor.noise_error(self.views, ref[chunk].to(self.device), tgt[chunk].to(self.device),
                                                     pose[chunk], t[chunk].to(self.device), noise[chunk]))
             self.forward_samples += len(parts[-1])
+            self.stage_samples.setdefault(self._stage, [0, 0])[0] += len(parts[-1])
             self._advance(len(parts[-1]))
         return torch.cat(parts)
 
@@ -127,4 +129,5 @@ class SolverContext:
             parts.append(errors.detach())
             del errors
         self.backward_samples += len(ref)
+        self.stage_samples.setdefault(self._stage, [0, 0])[1] += len(ref)
         return torch.cat(parts)

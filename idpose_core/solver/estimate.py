@@ -86,5 +86,6 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
         ambiguous=ambiguous.numpy(),
         forward_samples=context.forward_samples,
         backward_samples=context.backward_samples,
+        stage_samples={stage: tuple(counts) for stage, counts in context.stage_samples.items()},
         stage_seconds=seconds,
     )

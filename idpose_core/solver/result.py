@@ -15,8 +15,9 @@ class SolverResult:
     ``runner_up_poses`` (N-1, 3) / ``runner_up_scores`` (N-1,): the best probed candidate far from the
     answer (NaN if none) and its error under the same noise; ``ambiguous`` (N-1,) flags views whose
     runner-up is nearly as good (rule in ``idpose_core.solver.scoring``). ``forward_samples`` counts
-    predictor samples evaluated, ``backward_samples`` those differentiated; ``stage_seconds`` maps
-    stage name -> wall time.
+    predictor samples evaluated, ``backward_samples`` those differentiated, ``stage_samples`` both per
+    stage (the exploration's differentiated samples are its batched adjust steps, every other stage's
+    are steps of one sample); ``stage_seconds`` maps stage name -> wall time.
     """
 
     rel_poses: np.ndarray
@@ -26,4 +27,5 @@ class SolverResult:
     ambiguous: np.ndarray
     forward_samples: int
     backward_samples: int
+    stage_samples: dict[str, tuple[int, int]] = field(default_factory=dict)
     stage_seconds: dict[str, float] = field(default_factory=dict)

@@ -47,8 +47,10 @@ class Zero123Predictor:
 
     Conditioning follows the original: the reference's CLIP image embedding and the pose features
     go through ``cc_projection`` to ONE cross-attention token; the reference's VAE latent (mode,
-    unscaled) is stacked after the noisy target latent (mode x scaling factor 0.18215). The VAE
-    always runs in float32; UNet, CLIP and projection run in ``dtype`` (autocast unless float32).
+    unscaled) is stacked after the noisy target latent (mode x scaling factor 0.18215). Only the
+    UNet, evaluated per sample, runs in ``dtype`` (autocast unless float32); VAE and CLIP (once per
+    view) and the pose path (cc_projection) stay float32: on the demo model, bfloat16 there flipped
+    answers that float32 got right (``bench/README.md``).
     ``max_batch`` bounds one UNet call; ``gradient_checkpointing`` trades time for memory on request.
     """
 
@@ -67,9 +69,9 @@ class Zero123Predictor:
         self.max_batch = max_batch
         self.modules = modules
         modules.freeze()
-        _place(modules.vae, self.device, torch.float32)
-        for module in (modules.unet, modules.image_encoder, modules.cc_projection):
-            _place(module, self.device, self.dtype)
+        for module in (modules.vae, modules.image_encoder, modules.cc_projection):
+            _place(module, self.device, torch.float32)
+        _place(modules.unet, self.device, self.dtype)
         if gradient_checkpointing:
             modules.unet.enable_gradient_checkpointing()
         self.num_train_timesteps = int(modules.scheduler.config.num_train_timesteps)
@@ -117,11 +119,10 @@ class Zero123Predictor:
         pixels = images.to(self.device, torch.float32)
         vae = self.modules.vae
         ref_latents = vae.encode(pixels).latent_dist.mode()
-        with self._autocast():
-            embeds = self.modules.image_encoder(pixel_values=self.clip_pixels(pixels)).image_embeds
+        embeds = self.modules.image_encoder(pixel_values=self.clip_pixels(pixels)).image_embeds
         return Views(
             latents=ref_latents * vae.config.scaling_factor,
-            conditioning={"ref_latents": ref_latents, "image_embeds": embeds.float()},
+            conditioning={"ref_latents": ref_latents, "image_embeds": embeds},
         )
 
     def noise_error(self, views: Views, ref: torch.Tensor, tgt: torch.Tensor, pose: torch.Tensor,
@@ -151,9 +152,9 @@ class Zero123Predictor:
         return ((resized + 1) / 2 - self._clip_mean) / self._clip_std
 
     def pose_tokens(self, image_embeds: torch.Tensor, pose: torch.Tensor) -> torch.Tensor:
-        """CLIP embeddings (B, P) + poses (B, 3) -> cross-attention tokens (B, 1, D) via cc_projection."""
-        features = torch.cat([image_embeds, pose_features(pose).to(image_embeds.dtype)], dim=-1)
-        with self._autocast():
+        """CLIP embeddings (B, P) + poses (B, 3) -> cross-attention tokens (B, 1, D) via cc_projection (float32)."""
+        features = torch.cat([image_embeds, pose_features(pose)], dim=-1).float()
+        with torch.autocast(self.device.type, enabled=False):
             return self.modules.cc_projection(features)[:, None, :]
 
     def predict_noise(self, noisy: torch.Tensor, ref_latents: torch.Tensor, t: torch.Tensor,
