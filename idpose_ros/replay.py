@@ -128,20 +128,26 @@ class ReplayEstimator:
             return self._status_serial, self._status
 
     def _wait_until_idle(self, timeout: float, progress: Callable[[str, int, int], None] | None,
-                         after: int = 0) -> dict[str, str]:
-        """The first /diagnostics status after serial ``after`` whose state is idle; ReplayError on failure."""
+                         after: int = 0, finished: Callable[[], bool] | None = None) -> dict[str, str]:
+        """The first idle /diagnostics status after serial ``after`` (and, given ``finished``, published after
+        ``finished()`` first held: an idle status sent while the estimate request was in flight is stale);
+        ReplayError on failure or timeout."""
         deadline = time.monotonic() + timeout
+        idle_after = None if finished else after
         while time.monotonic() < deadline:
             serial, status = self._latest_status()
+            if idle_after is None and finished():
+                idle_after = serial
             if status is not None and serial > after:
-                if status["state"] == "idle":
+                if status["state"] == "idle" and idle_after is not None and serial > idle_after:
                     return status
                 if status["state"] == "failed":
                     raise ReplayError(f"the estimator node failed: {status['last_error'] or status['model']}")
                 if progress is not None and status["state"] == "estimating":
                     progress(status["stage"], round(float(status["progress_percent"])), 100)
             time.sleep(0.02)
-        raise ReplayError(f"the estimator node {self.node_name} did not become idle within {timeout:g} s")
+        raise ReplayError(f"the estimator node {self.node_name} did not {'publish its poses and ' if finished else ''}"
+                          f"become idle within {timeout:g} s")
 
     # ----- services and parameters ---------------------------------------------------------------------------------
     def _call(self, name: str) -> Trigger.Response:
@@ -193,7 +199,6 @@ class ReplayEstimator:
         response = self._call("estimate")
         if not response.success:
             raise ReplayError(f"{self.node_name}/estimate refused: {response.message}")
-        status = self._wait_until_idle(self.timeout, progress, after)
         anchor_stamp = _stamp_ns(messages[0].header.stamp)
 
         def published() -> bool:
@@ -201,7 +206,7 @@ class ReplayEstimator:
                 return (self._poses is not None and len(self._poses.poses) == len(messages)
                         and _stamp_ns(self._poses.header.stamp) == anchor_stamp)
 
-        _wait(published, SERVICE_TIMEOUT, f"{len(messages)} poses on {self.node_name}/poses")
+        status = self._wait_until_idle(self.timeout, progress, after, finished=published)
         with self._lock:
             poses = np.stack([pose_to_matrix(pose) for pose in self._poses.poses])
         views = range(1, len(messages))
