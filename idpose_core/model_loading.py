@@ -30,7 +30,8 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
     """
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {sorted(PRECISIONS)}, got {precision!r}")
-    if precision == "float16" and resolve_device(device).type == "cpu":
+    device = resolve_device(device)
+    if precision == "float16" and device.type == "cpu":
         logging.getLogger(__name__).warning(
             "precision float16 on the CPU: PyTorch has no fast float16 CPU kernels, an estimate will be far slower "
             "than in float32; use bfloat16 (CPUs with avx512_bf16 or AMX) or float32")
@@ -43,7 +44,6 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
             "model_path is empty: using the EMBEDDED DEMO MODEL (%s), a small diffusion model trained only on "
             "the synthetic demo objects. It is a demonstration: poses of real objects need Zero-1-to-3 weights "
             "(set model_path).", folder)
-        device = resolve_device(device)
         return DemoPredictor.from_pretrained(folder, device, resolve_dtype(PRECISIONS[precision], device))
     path = Path(model_path).expanduser()
     if path.is_dir():

@@ -8,6 +8,7 @@ import torch
 
 from idpose_core.demo_model.model import DemoDiffusionModel
 from idpose_core.predictor import Views
+from idpose_core.zero123.predictor import reduced_precision
 
 EMBEDDED_MODEL_DIR = Path(__file__).resolve().parents[1] / "assets" / "demo_model"
 SOLVER_DEFAULTS_FILE = "solver_defaults.json"
@@ -46,9 +47,6 @@ class DemoPredictor:
         """The demo model shipped inside the package (``idpose_core/assets/demo_model``)."""
         return cls.from_pretrained(EMBEDDED_MODEL_DIR, device, dtype)
 
-    def _autocast(self):
-        return torch.autocast(self.device.type, dtype=self.dtype, enabled=self.dtype != torch.float32)
-
     @property
     def device(self) -> torch.device:
         return next(self.model.parameters()).device
@@ -68,7 +66,7 @@ class DemoPredictor:
         ref, tgt, t = ref.to(device), tgt.to(device), t.to(device)
         noise = noise.to(device, torch.float32)
         noisy = self.model.add_noise(views.latents[tgt], noise, t)
-        with self._autocast():
+        with reduced_precision(self.device, self.dtype):
             predicted = self.model.predict_noise(noisy, views.conditioning["image"][ref],
                                                  views.conditioning["embedding"][ref],
                                                  pose.to(device, torch.float32), t)

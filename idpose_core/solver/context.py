@@ -34,14 +34,22 @@ class SolverContext:
         self.probe_t = min(int(round(config.probe_t * steps)), steps - 1)
         self.refine_t = tuple(min(int(round(f * steps)), steps - 1) for f in config.refine_t_range)
         self.probe_noise = self.draw_noise(config.probe_batch)
-        self.forward_samples = 0
-        self.backward_samples = 0
         self.stage_samples: dict[str, list[int]] = {}  # stage -> [evaluated, differentiated]
         self._progress = progress
         self._cancel = cancel
         self._stage, self._done, self._total = "", 0, 0
 
     # ----- bookkeeping ---------------------------------------------------------------------------
+
+    @property
+    def forward_samples(self) -> int:
+        """Predictor samples evaluated so far, over all stages."""
+        return sum(evaluated for evaluated, _ in self.stage_samples.values())
+
+    @property
+    def backward_samples(self) -> int:
+        """Predictor samples differentiated so far, over all stages."""
+        return sum(differentiated for _, differentiated in self.stage_samples.values())
 
     def begin_stage(self, stage: str, total: int) -> None:
         """Start counting progress of ``stage`` towards ``total`` samples."""
@@ -79,7 +87,6 @@ class SolverContext:
             chunk = slice(start, start + self.config.max_batch)
             parts.append(self.predictor.noise_error(self.views, ref[chunk].to(self.device), tgt[chunk].to(self.device),
                                                     pose[chunk], t[chunk].to(self.device), noise[chunk]))
-            self.forward_samples += len(parts[-1])
             self.stage_samples.setdefault(self._stage, [0, 0])[0] += len(parts[-1])
             self._advance(len(parts[-1]))
         return torch.cat(parts)
@@ -128,6 +135,5 @@ class SolverContext:
             errors.sum().backward(retain_graph=start + size < len(ref))  # ``poses`` may share a graph
             parts.append(errors.detach())
             del errors
-        self.backward_samples += len(ref)
         self.stage_samples.setdefault(self._stage, [0, 0])[1] += len(ref)
         return torch.cat(parts)

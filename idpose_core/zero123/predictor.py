@@ -30,6 +30,11 @@ def resolve_dtype(dtype: torch.dtype | None, device: torch.device) -> torch.dtyp
     return torch.float32
 
 
+def reduced_precision(device: torch.device, dtype: torch.dtype):
+    """Autocast to ``dtype`` on ``device``; a no-op for float32 (what the predictors wrap their UNet calls in)."""
+    return torch.autocast(device.type, dtype=dtype, enabled=dtype != torch.float32)
+
+
 def pose_features(pose: torch.Tensor) -> torch.Tensor:
     """Relative poses (B, 3) = (d_polar, d_azimuth, d_radius) -> (B, 4) [d_polar, sin, cos, d_radius]."""
     return torch.stack([pose[:, 0], torch.sin(pose[:, 1]), torch.cos(pose[:, 1]), pose[:, 2]], dim=-1)
@@ -160,7 +165,7 @@ class Zero123Predictor:
     def predict_noise(self, noisy: torch.Tensor, ref_latents: torch.Tensor, t: torch.Tensor,
                       tokens: torch.Tensor) -> torch.Tensor:
         """UNet eps for noisy target latents (B, 4, h, w) given reference latents, steps (B,), tokens (B, 1, D)."""
-        with self._autocast():
+        with reduced_precision(self.device, self.dtype):
             return self.modules.unet(torch.cat([noisy, ref_latents], dim=1), t, encoder_hidden_states=tokens).sample
 
     def sample_view(self, views: Views, ref: int, pose, steps: int = 50, guidance: float = 3.0,
@@ -169,9 +174,6 @@ class Zero123Predictor:
         return ddim_sample_view(self, views, ref, pose, steps=steps, guidance=guidance, eta=eta, seed=seed)
 
     # ------------------------------------------------------------------ checks
-    def _autocast(self):
-        return torch.autocast(self.device.type, dtype=self.dtype, enabled=self.dtype != torch.float32)
-
     def _check_images(self, images: torch.Tensor) -> None:
         factor = 2 ** (len(self.modules.vae.config.block_out_channels) - 1)
         if images.ndim != 4 or images.shape[1] != 3:
