@@ -25,8 +25,8 @@ import torch
 from bench.unit_costs import RESULTS
 from idpose_core.cameras import spherical_to_c2w
 from idpose_core.demo_model import DemoPredictor
-from idpose_core.model_loading import load_predictor
 from idpose_core.metrics import pair_errors
+from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import estimate_view_poses
 from idpose_core.solver import SolverConfig
 from idpose_core.synthetic.scenes import CAMERA_RADIUS, SceneRenderer, demo_objects, random_camera_spheres

@@ -48,11 +48,13 @@ def step_cost_section(report: dict | None) -> list[str]:
         per_sample = figures.get("per_sample_seconds")
         lines.append(f"| {kind} | {figures['seconds']:.2f} | {figures['cpu_seconds']:.2f} | {figures['peak_gb']:.2f} | "
                      f"{figures['run_peak_gb']:.2f} | " + (f"{per_sample:.2f}" if per_sample else "") + " |")
-    lines += ["", "Official step split (first run, wall): " + ", ".join(f"{k} {v:.2f} s" for k, v in official_parts.items())
+    split = ", ".join(f"{k} {v:.2f} s" for k, v in official_parts.items())
+    lines += ["", "Official step split (first run, wall): " + split
               + ".", ""]
     for precision, ratio in report["ratio_official_over_ours"].items():
         lines.append(f"**Ours in {precision}: per step the official path costs {ratio['step_seconds']:.2f}x our time "
-                     f"({ratio['step_cpu_seconds']:.2f}x CPU time) and {ratio['step_run_peak_gb']:.2f}x our memory while "
+                     f"({ratio['step_cpu_seconds']:.2f}x CPU time) and {ratio['step_run_peak_gb']:.2f}x our memory "
+                     "while "
                      f"running ({ratio['step_peak_gb']:.2f}x the peak with building); per probe "
                      f"{ratio['probe_seconds']:.2f}x time, {ratio['probe_run_peak_gb']:.2f}x memory.**")
     return lines
@@ -64,7 +66,8 @@ def precision_section(fidelity: dict | None, accuracy: dict[str, dict | None]) -
     if fidelity is None:
         return [title, "", "not run (`python bench/precision_fidelity.py`)."]
     figures, setup = fidelity["bfloat16_vs_float32"], fidelity["setup"]
-    lines = [title, "", f"Full-size architecture, random weights, identical inputs ({setup['probe_batch']} probe samples "
+    lines = [title, "", "Full-size architecture, random weights, identical inputs "
+             f"({setup['probe_batch']} probe samples "
              f"at t = {setup['probe_t']}, {setup['steps']} single-sample steps): probe errors differ by at most "
              f"{figures['probe_error_max_relative_difference']:.1e} (relative), step errors by "
              f"{figures['step_error_max_relative_difference']:.1e}; pose gradients: cosine "
@@ -108,7 +111,8 @@ def counts_section(report: dict | None) -> list[str]:
     for row in report["rows"]:
         official = " / ".join(duration(row["official"]["projected"][m]) for m in PROJECTIONS)
         for preset in PRESETS:
-            cells = [" / ".join(f"{duration(row['ours'][preset]['projected'][p][m])} (1/{speedup(row, preset, p, m):.1f})"
+            cells = [" / ".join(f"{duration(row['ours'][preset]['projected'][p][m])} "
+                                f"(1/{speedup(row, preset, p, m):.1f})"
                                 for m in PROJECTIONS) for p in precisions]
             lines.append(f"| {row['n']} | {preset} | {official} | " + " | ".join(cells) + " |")
     for precision, units in costs.items():
@@ -119,7 +123,8 @@ def counts_section(report: dict | None) -> list[str]:
                 ("ours probe of 16", "ours_probe"), ("encode per view", "encode_per_view"),
                 ("official step", "official_step"), ("official probe", "official_probe"))) + "."]
     reference = costs[precisions[0]]["reference_seconds"]
-    lines += ["", "Quiet-machine figures (the issue's): " + ", ".join(f"{key} {value} s" for key, value in ISSUE_REFERENCE.items())
+    quiet = ", ".join(f"{key} {value} s" for key, value in ISSUE_REFERENCE.items())
+    lines += ["", "Quiet-machine figures (the issue's): " + quiet
               + "; our other units scaled from that float32 step by item 1's CPU-time ratios (e.g. "
               f"{precisions[0]} probe of 16: {reference['ours_probe']:.2f} s)."]
     return lines
@@ -163,7 +168,8 @@ def end_to_end_section(report: dict | None) -> list[str]:
              f"{report['load_seconds']:.2f} s (not counted below), load average {report['load_average'][0]:.1f} -> "
              f"{report['load_average'][1]:.1f}. Each estimate: preprocessing of 256 px renders, the solver, "
              "anchor-frame poses (`estimate_view_poses`).", "",
-             "| n | preset | median s per estimate | scenes | samples (differentiated) | RotAcc@15 | RotAcc@30 | pairs |",
+             "| n | preset | median s per estimate | scenes | samples (differentiated) | RotAcc@15 | RotAcc@30 "
+             "| pairs |",
              "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for row in report["rows"]:
         first = row["runs"][0]
@@ -192,7 +198,8 @@ def targets_section(steps: dict | None, counts: dict | None, schedule: dict | No
             for precision in costs:
                 lines.append(f"| n = 2 `{preset}` projected <= 1/{bound} of the official | {precision} | " + " | ".join(
                     f"{duration(two['ours'][preset]['projected'][precision][m])} vs "
-                    f"{duration(two['official']['projected'][m])}: " + check(speedup(two, preset, precision, m), bound, "1/")
+                    f"{duration(two['official']['projected'][m])}: "
+                    + check(speedup(two, preset, precision, m), bound, "1/")
                     for m in PROJECTIONS) + " |")
     if schedule:
         for n, results in sorted(schedule["results"].items()):
@@ -220,11 +227,14 @@ def closing_note(steps: dict | None, counts: dict | None, schedule: dict | None,
     parts = [f"Measured with a 1-minute load average of {steps['machine']['load_average_before'][0]:.1f} before the "
              f"run on {steps['machine']['cpus']} cores; the official path in float32."]
     for precision, ratio in steps["ratio_official_over_ours"].items():
-        projected = lambda preset, m: speedup(two, preset, precision, m)  # noqa: E731
+        def projected(preset: str, measure: str, precision: str = precision) -> float:
+            return speedup(two, preset, precision, measure)
+
         parts.append(
             f"Ours in {precision}: per step the official path costs {ratio['step_seconds']:.2f}x our wall time "
             f"({ratio['step_cpu_seconds']:.2f}x CPU time) and {ratio['step_run_peak_gb']:.2f}x our memory; a two-view "
-            f"estimate with the paper's schedule is projected at 1/{projected('default', 'seconds'):.1f} of the official "
+            "estimate with the paper's schedule is projected at "
+            f"1/{projected('default', 'seconds'):.1f} of the official "
             f"time (1/{projected('default', 'cpu_seconds'):.1f} from CPU times, "
             f"1/{projected('default', 'reference_seconds'):.1f} from the quiet-machine figures), the `fast` preset at "
             f"1/{projected('fast', 'seconds'):.1f} (1/{projected('fast', 'cpu_seconds'):.1f}, "

@@ -71,7 +71,8 @@ def main() -> None:
             row["ours"][preset] = ours
             print(f"n={count} {preset:<8} forward {ours['forward_samples']:>6} backward {ours['backward_samples']:>6}"
                   f" (adjust {ours['adjust_samples']})" + "".join(
-                      f"  {precision}: {seconds['seconds'] / 60:.1f} min wall, {seconds['cpu_seconds'] / 60:.1f} min CPU"
+                      f"  {precision}: {seconds['seconds'] / 60:.1f} min wall, "
+                      f"{seconds['cpu_seconds'] / 60:.1f} min CPU"
                       for precision, seconds in ours["projected"].items())
                   + f"   (oracle run {time.perf_counter() - start:.1f} s)", flush=True)
         print(f"n={count} official forward {official['forward_samples']:>6} backward {official['backward_samples']:>6}"

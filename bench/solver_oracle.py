@@ -20,8 +20,14 @@ from idpose_core.cameras import spherical_to_c2w
 from idpose_core.metrics import aggregate, pair_errors
 from idpose_core.solver import SolverConfig, estimate_poses
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOracle
-from idpose_core.synthetic.scenes import (ObjectSpec, SceneRenderer, demo_objects, oracle_objects,
-                                          random_camera_spheres, symmetric_objects)
+from idpose_core.synthetic.scenes import (
+    ObjectSpec,
+    SceneRenderer,
+    demo_objects,
+    oracle_objects,
+    random_camera_spheres,
+    symmetric_objects,
+)
 
 SETS = {"oracle": oracle_objects, "demo": demo_objects, "symmetric": symmetric_objects}
 RENDER_SIZE = 64  # the oracle only checks the input's shape; it answers from its own render grid

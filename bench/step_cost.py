@@ -74,7 +74,8 @@ def main() -> None:
     for alternation in range(args.alternations):
         for kind in kinds:
             done = alternation * len(kinds) + kinds.index(kind)
-            print(f"[{100 * done // total:3d}%] alternation {alternation + 1}/{args.alternations}: {kind} ...", flush=True)
+            print(f"[{100 * done // total:3d}%] alternation {alternation + 1}/{args.alternations}: {kind} ...",
+                  flush=True)
             result = run_child(kind, args)
             runs[kind].append(result)
             print(f"       {kind}: {result['seconds']:.2f} s ({result['cpu_seconds']:.2f} CPU s), peak "

@@ -57,7 +57,8 @@ class UnitCosts:
         report = json.loads(path.read_text())
         median = report["median"]
         if f"ours_step@{precision}" not in median:
-            raise KeyError(f"{path} has no measurements in {precision}: rerun bench/step_cost.py --precisions {precision}")
+            raise KeyError(f"{path} has no measurements in {precision}: "
+                           f"rerun bench/step_cost.py --precisions {precision}")
         official_step = median["official_step"]
         encode_wall = statistics.median(run["parts"]["encode"] for run in report["runs"]["official_step"])
         adjust = median[f"ours_adjust@{precision}"]
@@ -91,10 +92,12 @@ def reference_costs(measured_cpu: UnitCosts, measured_cpu_float32: UnitCosts) ->
     """
     reference = ISSUE_REFERENCE
     scale = reference["ours_step"] / measured_cpu_float32.ours_step
-    return UnitCosts(ours_step=measured_cpu.ours_step * scale, ours_adjust_sample=measured_cpu.ours_adjust_sample * scale,
+    return UnitCosts(ours_step=measured_cpu.ours_step * scale,
+                     ours_adjust_sample=measured_cpu.ours_adjust_sample * scale,
                      ours_probe=measured_cpu.ours_probe * scale,
                      official_step=reference["official_step"], official_probe=reference["official_probe"],
-                     encode_per_view=reference["encode"], threads=measured_cpu.threads, precision=measured_cpu.precision)
+                     encode_per_view=reference["encode"], threads=measured_cpu.threads,
+                     precision=measured_cpu.precision)
 
 
 def all_costs(precisions: list[str], path: Path = STEP_COST_FILE) -> dict[str, dict[str, UnitCosts]]:

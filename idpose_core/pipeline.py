@@ -5,8 +5,8 @@ preprocess_views -> estimate_poses -> anchor_frame_poses. No ROS here.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 import torch

@@ -211,6 +211,6 @@ class TransformBuffer:
         common = next((f for f in source_chain if f in target_chain), None)
         if common is None:
             raise TransformLookupError(f"frames {target!r} and {source!r} are not connected in the transform tree")
-        common_T_source = self._root_from(source_chain[: source_chain.index(common) + 1], stamp)
-        common_T_target = self._root_from(target_chain[: target_chain.index(common) + 1], stamp)
-        return invert_transform(common_T_target) @ common_T_source
+        common_from_source = self._root_from(source_chain[: source_chain.index(common) + 1], stamp)
+        common_from_target = self._root_from(target_chain[: target_chain.index(common) + 1], stamp)
+        return invert_transform(common_from_target) @ common_from_source

@@ -84,7 +84,7 @@ def _transform_buffer(reader) -> TransformBuffer:
     buffer = TransformBuffer()
     for topic, static in (("/tf", False), ("/tf_static", True)):
         connections = [c for c in reader.connections if c.topic == topic and c.msgtype == TF_TYPE]
-        for connection, _, raw in (reader.messages(connections=connections) if connections else ()):
+        for _, _, raw in (reader.messages(connections=connections) if connections else ()):
             for item in reader.deserialize(raw, TF_TYPE).transforms:
                 t, q = item.transform.translation, item.transform.rotation
                 try:

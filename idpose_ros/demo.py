@@ -25,13 +25,15 @@ def demo_bags() -> list[Path]:
 
 def summary_table(reports: dict[str, dict]) -> str:
     """One row per object and one for all pairs: RotAcc@15/30 and mean rotation error, model vs random poses."""
-    lines = ["| object | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° | random RotAcc@30° |",
+    lines = ["| object | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° "
+             "| random RotAcc@30° |",
              "|---|---|---|---|---|---|---|"]
     rows = {name: (report["aggregates"]["all"], report["random_baseline"]["aggregates"]["all"])
             for name, report in reports.items()}
     rows["all"] = pooled_summaries(list(reports.values()))
     for name, (model, baseline) in rows.items():
-        lines.append(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | {100 * model['rot_acc_30']:.1f} | "
+        lines.append(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | "
+                     f"{100 * model['rot_acc_30']:.1f} | "
                      f"{model['mean_rot_err_deg']:.1f} | {100 * baseline['rot_acc_15']:.1f} | "
                      f"{100 * baseline['rot_acc_30']:.1f} |")
     return "\n".join(lines)

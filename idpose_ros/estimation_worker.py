@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 ProgressFn = Callable[[str, int, int], None]
 Job = Callable[[ProgressFn, threading.Event], Any]

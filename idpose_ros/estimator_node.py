@@ -13,18 +13,19 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray
 from sensor_msgs.msg import CompressedImage, Image
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
@@ -37,8 +38,14 @@ from idpose_ros.estimation_worker import EstimationWorker, Outcome, ProgressFn
 from idpose_ros.model_holder import ModelHolder
 from idpose_ros.parameters import current_values, declare_parameters, node_settings, solver_config
 from idpose_ros.view_buffer import CaptureRefused, View, ViewBuffer
-from msg_adapters import AdapterError, array_to_image, camera_markers, compressed_to_rgb, image_to_rgb, \
-    poses_to_pose_array
+from msg_adapters import (
+    AdapterError,
+    array_to_image,
+    camera_markers,
+    compressed_to_rgb,
+    image_to_rgb,
+    poses_to_pose_array,
+)
 
 NODE_NAME = "idpose_estimator"
 SHUTDOWN_TIMEOUT = 1.5  # s to let a cancelled estimate stop on Ctrl-C (the node must exit within 2 s)
@@ -186,7 +193,8 @@ class EstimatorNode(Node):
             self.get_logger().warning(f"the cancelled estimate did not stop within {RESET_TIMEOUT} s; "
                                       "its result will be dropped")
         dropped = self._buffer.clear()
-        self.get_logger().info(f"reset: dropped {dropped} views" + (" after cancelling the estimate" if cancelled else ""))
+        self.get_logger().info(f"reset: dropped {dropped} views"
+                               + (" after cancelling the estimate" if cancelled else ""))
         response.success = True
         response.message = f"dropped {dropped} views" + (" (cancelled the running estimate)" if cancelled else "")
         return response

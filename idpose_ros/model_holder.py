@@ -5,8 +5,9 @@ retried (the model parameters are read-only) and its reason is what ~/estimate a
 """
 from __future__ import annotations
 
+import contextlib
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 from idpose_core.predictor import NoisePredictor
 
@@ -60,9 +61,7 @@ class ModelHolder:
         self._loading = True
 
         def load() -> None:
-            try:
+            with contextlib.suppress(ModelUnavailable):  # already reported through on_failure
                 self.get()
-            except ModelUnavailable:
-                pass  # already reported through on_failure
 
         threading.Thread(target=load, name="idpose-model-load", daemon=True).start()

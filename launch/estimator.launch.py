@@ -6,12 +6,13 @@
 ``<image_topic>/compressed`` (image_transport's naming); a non-empty ``model_path`` overrides the
 one in ``params_file`` (default: the installed config/estimator.yaml).
 """
-from launch import LaunchContext, LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
+
+from launch import LaunchContext, LaunchDescription
 
 PACKAGE = "idpose_ros"
 

@@ -32,11 +32,17 @@ import matplotlib.pyplot as plt  # noqa: E402 (after choosing the non-interactiv
 from diffusers.training_utils import EMAModel
 from tqdm import tqdm
 
-from idpose_core.demo_model import EMBEDDED_MODEL_DIR, DemoDiffusionModel, DemoModelConfig, DemoPredictor
 from idpose_core.cameras import spherical_to_c2w
+from idpose_core.demo_model import EMBEDDED_MODEL_DIR, DemoDiffusionModel, DemoModelConfig, DemoPredictor
 from idpose_core.demo_model.grid_check import grid_search, pose_grid, rotation_errors
-from idpose_core.demo_model.training_data import (PairBatch, PairPool, RenderedViews, cached_views, make_pairs,
-                                                  random_pairs)
+from idpose_core.demo_model.training_data import (
+    PairBatch,
+    PairPool,
+    RenderedViews,
+    cached_views,
+    make_pairs,
+    random_pairs,
+)
 from idpose_core.metrics import random_pose_errors
 from idpose_core.synthetic.scenes import demo_objects
 
@@ -148,7 +154,8 @@ def ema_predictor(model: DemoDiffusionModel, ema: EMAModel, config: DemoModelCon
 
 
 def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: torch.Tensor, pose: torch.Tensor,
-                  reference_view: torch.Tensor, t: torch.Tensor, view_weight: float) -> tuple[torch.Tensor, torch.Tensor]:
+                  reference_view: torch.Tensor, t: torch.Tensor, view_weight: float
+                  ) -> tuple[torch.Tensor, torch.Tensor]:
     """(total loss, denoising loss). Denoising: MSE of the UNet's output (noise or clean target, as the
     config's ``prediction_type`` says) at the true pose. With absolute view conditioning, plus
     ``view_weight`` x the MSE of the view head's (polar - pi/2, sin azimuth, cos azimuth) of the reference."""

@@ -21,8 +21,8 @@ from idpose_ros.bag_io import BagError, BagWriter
 from idpose_ros.bag_views import decode_view, load_view_messages, read_bag_views
 from idpose_ros.make_synthetic_bag import (
     IMAGE_TOPIC,
-    POSE_TOPIC,
     PERIOD_NS,
+    POSE_TOPIC,
     START_NS,
     make_bag,
     write_pose,

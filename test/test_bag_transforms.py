@@ -90,10 +90,10 @@ def test_chained_lookup_at_a_sample_is_the_product_of_the_links():
 
 def test_lookup_between_stamps_interpolates_the_moving_link():
     buffer = chain_buffer()
-    world_T_base = buffer.lookup("world", "base", SECOND // 2)  # a quarter of the way
-    np.testing.assert_allclose(world_T_base, rigid_transform([0.5, 0.0, 0.0], z_rotation(math.pi / 8)), atol=1e-12)
-    world_T_camera = buffer.lookup("world", "camera_optical", SECOND)
-    np.testing.assert_allclose(world_T_camera[:3, 3], [1.0 + 0.5 * math.cos(math.pi / 4),
+    world_from_base = buffer.lookup("world", "base", SECOND // 2)  # a quarter of the way
+    np.testing.assert_allclose(world_from_base, rigid_transform([0.5, 0.0, 0.0], z_rotation(math.pi / 8)), atol=1e-12)
+    world_from_camera = buffer.lookup("world", "camera_optical", SECOND)
+    np.testing.assert_allclose(world_from_camera[:3, 3], [1.0 + 0.5 * math.cos(math.pi / 4),
                                                        0.5 * math.sin(math.pi / 4), 1.0], atol=1e-12)
 
 

@@ -9,7 +9,8 @@ SHIPPED = ROOT / "idpose_core" / "assets" / "demo_model"
 
 @pytest.mark.skipif(not (SHIPPED / "model.safetensors").is_file(), reason=f"no demo weights shipped in {SHIPPED}")
 def test_colcon_installs_the_demo_model_assets(workspace):
-    installed = list((workspace / "install" / "idpose_ros").glob("lib/python3*/site-packages/idpose_core/assets/demo_model"))
+    installed = list((workspace / "install" / "idpose_ros").glob(
+        "lib/python3*/site-packages/idpose_core/assets/demo_model"))
     assert len(installed) == 1, installed
     shipped = sorted(p.name for p in SHIPPED.iterdir() if p.is_file())
     assert "model.safetensors" in shipped

@@ -7,7 +7,6 @@ it. Reduced: the tiny random Zero-1-to-3 on 32 px views, 2 azimuth candidates, p
 adjustment steps, 2 refinement and 1 runner-up steps per view (endless refinement, 10^6 steps, where
 the SIGINT must land during the run); torch on one thread (test/conftest.py).
 """
-import os
 import re
 import signal
 import subprocess
@@ -100,7 +99,8 @@ def test_the_installed_estimator_refuses_without_views_and_stops_on_ctrl_c_mid_e
         spin_until(lambda: images.get_subscription_count() > 0, "the node's image subscription")
         for index, (rgb, alpha) in enumerate(object_views[:2]):
             images.publish(array_to_image(np.dstack([rgb, alpha]), "rgba8", Header(frame_id=f"cam{index}")))
-            spin_until(lambda: status.get("views_buffered") == str(index + 1), f"view {index + 1} to be buffered")
+            spin_until(lambda count=index + 1: status.get("views_buffered") == str(count),
+                       f"view {index + 1} to be buffered")
         assert call("estimate").success
         spin_until(lambda: status.get("stage") == "refinement", "the estimate to reach refinement")
 
@@ -132,7 +132,8 @@ def test_the_readme_walk_through_script_gets_the_poses(workspace, tiny_model_dir
     process = start_estimator(workspace, "/walkthrough", {
         **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request"}, log)
     try:
-        result = subprocess.run(in_workspace(workspace, f"{sys.executable} {script} {views} --ros-args -r __ns:=/walkthrough"),
+        command = f"{sys.executable} {script} {views} --ros-args -r __ns:=/walkthrough"
+        result = subprocess.run(in_workspace(workspace, command),
                                 capture_output=True, text=True, timeout=120)
         assert result.returncode == 0, result.stderr + log.read_text()
         lines = result.stdout.splitlines()

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import cv2
 import numpy as np
@@ -143,7 +144,8 @@ def harness(ros_context, tiny_model_dir, wait_for, request):
         h.close()
 
 
-def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harness, object_views, wait_for, tiny_model_dir):
+def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harness, object_views, wait_for,
+                                                                         tiny_model_dir):
     h = harness(diagnostics_period=0.1, variant="naive")  # naive: 3 anchor pairs to explore instead of 6
     assert h.call("estimate").message == "need at least 2 buffered views to estimate, have 0"
     messages = mixed_encodings(object_views)

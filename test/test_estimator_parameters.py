@@ -13,8 +13,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from idpose_core.solver import SolverConfig
-from idpose_ros.parameters import SOLVER_PARAMETERS, declare_parameters, node_settings, parameter_table, \
-    solver_config
+from idpose_ros.parameters import SOLVER_PARAMETERS, declare_parameters, node_settings, parameter_table, solver_config
 
 ROOT = Path(__file__).resolve().parents[1]
 READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "diagnostics_period"}
@@ -43,7 +42,7 @@ def test_solver_parameters_default_to_the_solver_defaults_and_build_its_config(n
 
 
 def test_every_parameter_is_described_and_bounded_where_numeric(node):
-    for name, default, _ in parameter_table():
+    for name, _, _ in parameter_table():
         (descriptor,) = node.describe_parameters([name])
         assert len(descriptor.description) > 20, name
         assert descriptor.read_only == (name in READ_ONLY), name
@@ -81,7 +80,8 @@ def test_valid_changes_are_taken_together(node):
                                               Parameter("views_per_estimate", value=10),
                                               Parameter("refine_steps_per_view", value=5)])
     assert results.successful, results.reason
-    assert (node.get_parameter("views_per_estimate").value, node.get_parameter("refine_steps_per_view").value) == (10, 5)
+    values = [node.get_parameter(name).value for name in ("views_per_estimate", "refine_steps_per_view")]
+    assert values == [10, 5]
 
 
 def test_an_invalid_override_at_start_up_names_the_problem(ros_context):

@@ -19,7 +19,7 @@ from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, random_cam
 from idpose_ros import estimator_node, evaluate_bag
 from idpose_ros.bag_report import write_report
 from idpose_ros.bag_views import read_bag_views
-from idpose_ros.evaluate_bag import OfflineEstimator, parse_args, plan_evaluation, run_evaluation, node_values
+from idpose_ros.evaluate_bag import OfflineEstimator, node_values, parse_args, plan_evaluation, run_evaluation
 from idpose_ros.make_synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, make_bag
 
 SEED, VIEWS, SIZE = 5, 10, 64

@@ -2,8 +2,8 @@
 
 The node is started as a user starts it (its module's entry point with --ros-args, in a namespace)
 with the tiny random Zero-1-to-3 from ``model_path``; evaluate_bag connects to it by name. The same
-model in offline mode must give the same numbers, and the node gets its own parameters back. Reduced for speed: 32 px views, one 2-view set,
-2 azimuth candidates, 1 probe sample, no adjustment, 2 refinement steps.
+model in offline mode must give the same numbers, and the node gets its own parameters back. Reduced for
+speed: 32 px views, one 2-view set, 2 azimuth candidates, 1 probe sample, no adjustment, 2 refinement steps.
 """
 import json
 import os

@@ -84,14 +84,16 @@ def truncated(msg: CompressedImage) -> CompressedImage:
 
 @pytest.mark.parametrize("msg, pattern", [
     (CompressedImage(format="jpeg", data=array.array("B", b"not an image at all")), r"does not decode as jpeg"),
-    (truncated(compressed(smooth_bgr(), ".jpg", "jpeg")), r"CompressedImage.data \(\d+ bytes\) does not decode as jpeg"),
+    (truncated(compressed(smooth_bgr(), ".jpg", "jpeg")),
+     r"CompressedImage.data \(\d+ bytes\) does not decode as jpeg"),
     (CompressedImage(format="png", data=array.array("B", b"\x89PNG\r\n\x1a\n" + bytes(40))), r"does not decode as png"),
     (CompressedImage(format="", data=array.array("B", b"garbage")), r"does not decode as an image"),
     (CompressedImage(format="png", data=array.array("B")), r"CompressedImage.data is empty"),
     (CompressedImage(format="h264", data=array.array("B", b"x")), r"format='h264' names no single jpeg, png or tiff"),
     (CompressedImage(format="jpeg png", data=array.array("B", b"x")), r"names no single"),
     (CompressedImage(format="16UC1; compressedDepth png", data=array.array("B", b"x")), r"compressedDepth transport"),
-], ids=["garbage-jpeg", "truncated-jpeg", "truncated-png", "garbage-unnamed", "empty", "h264", "two-codecs", "compressed-depth"])
+], ids=["garbage-jpeg", "truncated-jpeg", "truncated-png", "garbage-unnamed", "empty", "h264", "two-codecs",
+        "compressed-depth"])
 def test_bad_compressed_image_raises_adapter_error(msg, pattern):
     with pytest.raises(AdapterError, match=pattern):
         compressed_to_rgb(msg)

@@ -13,7 +13,8 @@ from std_msgs.msg import Header
 from msg_adapters import AdapterError, array_to_image, image_to_array
 from msg_adapters.encodings import NAMED_ENCODINGS, lookup_encoding
 
-GENERIC = [f"{depth}C{channels}" for depth in ("8U", "8S", "16U", "16S", "32S", "32F", "64F") for channels in (1, 2, 3, 4)]
+GENERIC = [f"{depth}C{channels}" for depth in ("8U", "8S", "16U", "16S", "32S", "32F", "64F")
+           for channels in (1, 2, 3, 4)]
 ALL_ENCODINGS = sorted(NAMED_ENCODINGS) + GENERIC
 
 
@@ -101,11 +102,13 @@ def with_fields(msg: Image, **fields) -> Image:
     (with_fields(good_mono16(), encoding="8UC5"), r"encoding '8UC5' is not supported"),
     (with_fields(good_mono16(), height=0, data=array.array("B")), r"Image.height and Image.width must be positive"),
     (with_fields(good_mono16(), width=0), r"Image.height and Image.width must be positive"),
-    (with_fields(good_mono16(), data=good_mono16().data[:-1]), r"Image.data has 29 bytes; expected step\*height = 10\*3 = 30"),
+    (with_fields(good_mono16(), data=good_mono16().data[:-1]),
+     r"Image.data has 29 bytes; expected step\*height = 10\*3 = 30"),
     (with_fields(good_mono16(), data=good_mono16().data * 2), r"Image.data has 60 bytes; expected"),
     (with_fields(good_mono16(), data=array.array("B")), r"Image.data has 0 bytes"),
     (with_fields(good_mono16(), step=7), r"Image.step=7 is smaller than width\*channels\*bytes = 4\*1\*2 = 8"),
-    (with_fields(good_mono16(), step=9, data=array.array("B", bytes(27))), r"Image.step=9 is not a multiple of the 2-byte"),
+    (with_fields(good_mono16(), step=9, data=array.array("B", bytes(27))),
+     r"Image.step=9 is not a multiple of the 2-byte"),
     (with_fields(wire_image(np.zeros((2, 4, 2), np.uint8), "yuv422"), width=3, step=6), r"Image.width=3 must be even"),
 ], ids=lambda value: value if isinstance(value, str) else "")
 def test_bad_image_raises_adapter_error_naming_the_field(msg, pattern):

@@ -106,7 +106,8 @@ def test_pose_array_holds_every_transform_in_order_with_the_header():
     matrices = np.stack([rotated_about_z(deg) for deg in (0, 90, 180, 270)])
     matrices[:, :3, 3] = np.arange(12).reshape(4, 3)
     message = poses_to_pose_array(matrices, "anchor_optical", Time(sec=5, nanosec=7))
-    assert message.header.frame_id == "anchor_optical" and (message.header.stamp.sec, message.header.stamp.nanosec) == (5, 7)
+    assert message.header.frame_id == "anchor_optical"
+    assert (message.header.stamp.sec, message.header.stamp.nanosec) == (5, 7)
     assert np.abs(np.stack([pose_to_matrix(p) for p in message.poses]) - matrices).max() < 1e-9
 
 

@@ -111,6 +111,5 @@ def test_bad_arguments_raise_value_errors():
         random_camera_spheres(np.random.default_rng(0), 3, polar_deg=(100.0, 20.0))
     with pytest.raises(ValueError, match="image_size"):
         SceneRenderer(demo_objects()[0], image_size=2)
-    with SceneRenderer(demo_objects()[0], image_size=SIZE) as renderer:
-        with pytest.raises(ValueError, match="radius"):
-            renderer.render(1.0, 1.0, radius=0.5)
+    with SceneRenderer(demo_objects()[0], image_size=SIZE) as renderer, pytest.raises(ValueError, match="radius"):
+        renderer.render(1.0, 1.0, radius=0.5)

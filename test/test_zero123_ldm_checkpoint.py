@@ -48,15 +48,18 @@ def unet_to_ldm(state, layers_per_block):
             name = f"input_blocks.{(int(parts[1]) + 1) * stride}.0.op.{leaf}"
         elif parts[0] == "up_blocks" and parts[2] == "upsamplers":
             block = int(parts[1])
-            name = f"output_blocks.{block * stride + layers_per_block}.{2 if block in up_with_attention else 1}.conv.{leaf}"
+            position = 2 if block in up_with_attention else 1
+            name = f"output_blocks.{block * stride + layers_per_block}.{position}.conv.{leaf}"
         elif parts[0] in ("down_blocks", "up_blocks"):
             block, kind, layer, rest = int(parts[1]), parts[2], int(parts[3]), ".".join(parts[4:])
             index = 1 + block * stride + layer if parts[0] == "down_blocks" else block * stride + layer
             prefix = "input_blocks" if parts[0] == "down_blocks" else "output_blocks"
-            name = f"{prefix}.{index}.0.{rename(rest, RESNET_LDM)}" if kind == "resnets" else f"{prefix}.{index}.1.{rest}"
+            name = (f"{prefix}.{index}.0.{rename(rest, RESNET_LDM)}" if kind == "resnets"
+                    else f"{prefix}.{index}.1.{rest}")
         elif parts[0] == "mid_block":
             kind, index, rest = parts[1], int(parts[2]), ".".join(parts[3:])
-            name = f"middle_block.{2 * index}.{rename(rest, RESNET_LDM)}" if kind == "resnets" else f"middle_block.1.{rest}"
+            name = (f"middle_block.{2 * index}.{rename(rest, RESNET_LDM)}" if kind == "resnets"
+                    else f"middle_block.1.{rest}")
         else:
             raise AssertionError(f"unmapped UNet key {key}")
         out["model.diffusion_model." + name] = value
@@ -71,7 +74,8 @@ def vae_to_ldm(state, num_blocks):
         name = re.sub(r"down_blocks\.(\d+)\.resnets\.", r"down.\1.block.", name)
         name = re.sub(r"down_blocks\.(\d+)\.downsamplers\.0\.", r"down.\1.downsample.", name)
         name = re.sub(r"up_blocks\.(\d+)\.resnets\.", lambda m: f"up.{num_blocks - 1 - int(m[1])}.block.", name)
-        name = re.sub(r"up_blocks\.(\d+)\.upsamplers\.0\.", lambda m: f"up.{num_blocks - 1 - int(m[1])}.upsample.", name)
+        name = re.sub(r"up_blocks\.(\d+)\.upsamplers\.0\.", lambda m: f"up.{num_blocks - 1 - int(m[1])}.upsample.",
+                      name)
         name = re.sub(r"mid_block\.resnets\.(\d+)\.", lambda m: f"mid.block_{int(m[1]) + 1}.", name)
         name = name.replace("conv_shortcut", "nin_shortcut")
         if ".mid_block.attentions.0." in name:
@@ -102,7 +106,8 @@ def clip_to_openai(state):
         elif layer:
             out[f"{prefix}transformer.resblocks.{layer[1]}.{rename(layer[2], CLIP_LAYER_LDM)}"] = value
         else:
-            name = {"embeddings.class_embedding": "class_embedding", "embeddings.patch_embedding.weight": "conv1.weight",
+            name = {"embeddings.class_embedding": "class_embedding",
+                    "embeddings.patch_embedding.weight": "conv1.weight",
                     "embeddings.position_embedding.weight": "positional_embedding"}.get(name, name)
             out[prefix + name.replace("pre_layrnorm", "ln_pre").replace("post_layernorm", "ln_post")] = value
     return out

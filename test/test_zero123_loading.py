@@ -15,8 +15,6 @@ from idpose_core.model_loading import load_predictor
 from idpose_core.zero123 import ModelLoadError, Zero123Config, Zero123Predictor
 
 
-
-
 @pytest.fixture(scope="module")
 def source():
     return Zero123Predictor.tiny(seed=3)

@@ -55,7 +55,8 @@ class DemoModelConfig:
         if any(c % self.norm_num_groups for c in self.block_out_channels):
             raise ValueError(f"norm_num_groups {self.norm_num_groups} must divide every block_out_channels entry")
         if self.resnet_time_scale_shift not in ("default", "scale_shift"):
-            raise ValueError(f"resnet_time_scale_shift must be 'default' or 'scale_shift', got {self.resnet_time_scale_shift!r}")
+            raise ValueError("resnet_time_scale_shift must be 'default' or 'scale_shift', "
+                             f"got {self.resnet_time_scale_shift!r}")
         if self.embedding_dim % self.encoder_heads:
             raise ValueError(f"encoder_heads {self.encoder_heads} must divide embedding_dim {self.embedding_dim}")
         if self.prediction_type not in ("epsilon", "sample"):

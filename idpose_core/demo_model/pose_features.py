@@ -2,8 +2,9 @@
 
 Zero-1-to-3's own 4-vector ``[d_polar, sin d_az, cos d_az, d_radius]`` (``idpose_core.zero123``'s
 ``pose_features``) still goes into ``cc_projection`` with the reference embedding. The Fourier
-vector is this model's deviation: it is projected into the UNet's timestep embedding (``class_embed_type="projection"``) so that the pose
-modulates every ResNet block instead of only the single cross-attention token.
+vector is this model's deviation: it is projected into the UNet's timestep embedding
+(``class_embed_type="projection"``) so that the pose modulates every ResNet block instead of only
+the single cross-attention token.
 """
 from __future__ import annotations
 

@@ -61,7 +61,7 @@ class DemoPredictor:
 
     def noise_error(self, views: Views, ref: torch.Tensor, tgt: torch.Tensor, pose: torch.Tensor,
                     t: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
-        """Per-sample noise MSE (B,) of denoising view ``tgt[b]`` from view ``ref[b]`` under ``pose[b]`` at step ``t[b]``."""
+        """Per-sample noise MSE (B,) of denoising view ``tgt[b]`` from view ``ref[b]`` under ``pose[b]`` at ``t[b]``."""
         device = self.device
         ref, tgt, t = ref.to(device), tgt.to(device), t.to(device)
         noise = noise.to(device, torch.float32)

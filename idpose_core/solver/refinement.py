@@ -36,10 +36,11 @@ def refine(ctx: SolverContext, start: torch.Tensor, variant: str, steps_per_view
            stage: str = "refinement") -> torch.Tensor:
     """Refined poses (N-1, 3) from start poses (N-1, 3), anchor to views 1..N-1.
 
-    Runs ``steps_per_view * (N-1)`` steps over ``pair_schedule(N, variant)``. Step s takes pair (i, j) = schedule[s mod len]: i = 0 updates p_j with ``l(p_j; x0, xj)``;
-    j = 0 updates p_i with ``l(p'_i; xi, x0)``; otherwise a seeded coin holds one of p_i, p_j fixed
-    and the other is updated with ``l(p'_i + p_j; xi, xj)``. Each step: one sample, fresh noise and
-    t, one SGD step at ``refine_lr``. A view's answer is the mean of its last ``average_last`` iterates.
+    Runs ``steps_per_view * (N-1)`` steps over ``pair_schedule(N, variant)``. Step s takes pair
+    (i, j) = schedule[s mod len]: i = 0 updates p_j with ``l(p_j; x0, xj)``; j = 0 updates p_i with
+    ``l(p'_i; xi, x0)``; otherwise a seeded coin holds one of p_i, p_j fixed and the other is updated
+    with ``l(p'_i + p_j; xi, xj)``. Each step: one sample, fresh noise and t, one SGD step at
+    ``refine_lr``. A view's answer is the mean of its last ``average_last`` iterates.
     """
     config = ctx.config
     count = len(start) + 1

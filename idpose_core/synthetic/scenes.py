@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +66,7 @@ def _quaternion(orientation_deg: tuple[float, float, float]) -> tuple[float, ...
     return pybullet.getQuaternionFromEuler([math.radians(a) for a in orientation_deg])
 
 
-@lru_cache(maxsize=None)
+@cache
 def _mesh_vertices(mesh: str) -> np.ndarray:
     """Vertex positions (V, 3) of an OBJ mesh in ``pybullet_data``, read once."""
     rows = [line.split()[1:4] for line in (DATA_PATH / mesh).read_text().splitlines()

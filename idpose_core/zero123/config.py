@@ -5,9 +5,10 @@ same code builds a random model (tests, benchmarks) or the skeleton that release
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
 
 # OpenAI CLIP pixel statistics, as CLIPImageProcessor and the original FrozenCLIPImageEmbedder use.
 CLIP_MEAN = (0.48145466, 0.4578275, 0.40821073)
@@ -59,7 +60,7 @@ class Zero123Config:
         return int(self.unet["cross_attention_dim"])
 
     @classmethod
-    def full(cls) -> "Zero123Config":
+    def full(cls) -> Zero123Config:
         """The released Zero-1-to-3 (105000 / 165000 / XL): SD-1 UNet with 8 input channels, SD VAE, ViT-L/14."""
         return cls(
             unet=_frozen(
@@ -103,7 +104,7 @@ class Zero123Config:
         )
 
     @classmethod
-    def tiny(cls) -> "Zero123Config":
+    def tiny(cls) -> Zero123Config:
         """Same family at toy widths (UNet 32/64, VAE 32/64 = 2x downsampling, CLIP 32 px, 32-d tokens)."""
         return cls(
             unet=_frozen(

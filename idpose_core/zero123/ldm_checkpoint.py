@@ -10,8 +10,8 @@ from __future__ import annotations
 import pickle
 import re
 import zipfile
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Callable, Mapping
 
 import torch
 from diffusers import AutoencoderKL, DDIMScheduler, UNet2DConditionModel

@@ -101,7 +101,8 @@ def _load_projection(folder: Path, linear_name: str) -> torch.nn.Linear:
     try:
         linear.load_state_dict(state)
     except RuntimeError as error:
-        raise ModelLoadError(folder.parent, f"part '{folder.name}' does not match its config: {_summary(error)}")
+        raise ModelLoadError(folder.parent,
+                             f"part '{folder.name}' does not match its config: {_summary(error)}") from error
     return linear
 
 

@@ -86,25 +86,25 @@ class Zero123Predictor:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_pretrained(cls, path: str | Path, device: str | torch.device = "auto",
-                        dtype: torch.dtype | None = None, **options) -> "Zero123Predictor":
+                        dtype: torch.dtype | None = None, **options) -> Zero123Predictor:
         """Load a diffusers-layout Zero-1-to-3 folder offline (raises ``ModelLoadError``)."""
         return cls(load_diffusers_folder(path), device, dtype, **options)
 
     @classmethod
     def from_ldm_checkpoint(cls, path: str | Path, device: str | torch.device = "auto",
                             dtype: torch.dtype | None = None, config: Zero123Config | None = None,
-                            use_ema: bool = False, **options) -> "Zero123Predictor":
+                            use_ema: bool = False, **options) -> Zero123Predictor:
         """Load the original single-file release (``zero123-xl.ckpt``, ``105000.ckpt``)."""
         return cls(load_ldm_checkpoint(path, config, use_ema), device, dtype, **options)
 
     @classmethod
     def random(cls, config: Zero123Config, seed: int = 0, device: str | torch.device = "cpu",
-               dtype: torch.dtype | None = None, **options) -> "Zero123Predictor":
+               dtype: torch.dtype | None = None, **options) -> Zero123Predictor:
         """Random weights in the architecture of ``config`` (benchmarks, tests)."""
         return cls(build_modules(config, seed), device, dtype, **options)
 
     @classmethod
-    def tiny(cls, seed: int = 0, **options) -> "Zero123Predictor":
+    def tiny(cls, seed: int = 0, **options) -> Zero123Predictor:
         """A tiny random Zero-1-to-3 (``Zero123Config.tiny``) on the CPU: what tests and CI run."""
         return cls.random(Zero123Config.tiny(), seed, **options)
 

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
 
 
 @torch.no_grad()
-def sample_view(predictor: "Zero123Predictor", views: Views, ref: int, pose, steps: int = 50,
+def sample_view(predictor: Zero123Predictor, views: Views, ref: int, pose, steps: int = 50,
                 guidance: float = 3.0, eta: float = 1.0, seed: int = 0) -> torch.Tensor:
     """The view at relative ``pose`` (3,) from view ``ref`` -> (3, H, W) in [-1, 1], float32 on the CPU.
 
