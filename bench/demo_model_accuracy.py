@@ -25,28 +25,27 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import torch  # noqa: E402 (after the path setup)
 
 from idpose_core.synthetic.scenes import demo_objects, unseen_objects  # noqa: E402
-from idpose_ros.bag_report import pooled_summaries  # noqa: E402
-from idpose_ros.evaluate_bag import main as evaluate_bag  # noqa: E402
+from idpose_ros.bag_report import pooled_summaries, write_report  # noqa: E402
+from idpose_ros.estimators import EstimatorOptions, ViewSetEstimator, make_estimator  # noqa: E402
+from idpose_ros.evaluate_bag import EvaluationProtocol, evaluate_bag  # noqa: E402
 from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
 
 OUT = ROOT / "bench" / "results" / "demo_model_accuracy.json"
 
 
-def evaluate_set(object_set: str, names: list[str], args: argparse.Namespace, work: Path) -> dict:
+def evaluate_set(object_set: str, names: list[str], estimator: ViewSetEstimator, args: argparse.Namespace,
+                 work: Path) -> dict:
     """Make one bag per object, evaluate each; the pooled aggregates of the model and of random poses."""
-    reports, seconds = [], []
+    evaluations = []
     for name in names:
         bag = work / f"{object_set}_{name}"
         if make_synthetic_bag([str(bag), "--objects", object_set, "--object", name, "--views", str(args.views),
                                "--seed", str(args.seed)]):
             raise RuntimeError(f"make_synthetic_bag failed for {object_set}/{name}")
-        report_dir = work / f"report_{object_set}_{name}"
-        if evaluate_bag([str(bag), "--out", str(report_dir), "--n", "2", "--samples", str(args.samples),
-                         "--preset", args.preset, "--seed", str(args.seed), "--precision", args.precision]):
-            raise RuntimeError(f"evaluate_bag failed on {bag}")
-        reports.append(json.loads((report_dir / "report.json").read_text()))
-        seconds += [estimate["seconds"] for estimate in reports[-1]["estimates"]]
-    model, random = pooled_summaries(reports)
+        evaluations.append(evaluate_bag(bag, estimator, protocol=EvaluationProtocol(args.samples, args.seed, (2,))))
+        print(write_report(work / f"report_{object_set}_{name}", evaluations[-1]), flush=True)
+    seconds = [estimate["seconds"] for evaluation in evaluations for estimate in evaluation.estimates]
+    model, random = pooled_summaries(evaluations)
     return {"objects": names, "model": model, "random": random, "seconds_per_estimate": sum(seconds) / len(seconds)}
 
 
@@ -65,11 +64,12 @@ def main() -> None:
         args.out = OUT if args.precision == "float32" else OUT.with_name(f"{OUT.stem}_{args.precision}.json")
     torch.set_num_threads(args.threads)
     started = time.monotonic()
+    estimator = make_estimator(EstimatorOptions(preset=args.preset, precision=args.precision))
     with tempfile.TemporaryDirectory(prefix="idpose_demo_accuracy_") as folder:
-        sets = {"demo objects, held-out views": evaluate_set("demo", [s.name for s in demo_objects()], args,
-                                                            Path(folder)),
-                "unseen objects": evaluate_set("unseen", [s.name for s in unseen_objects(args.unseen)], args,
-                                               Path(folder))}
+        sets = {"demo objects, held-out views": evaluate_set("demo", [s.name for s in demo_objects()], estimator,
+                                                            args, Path(folder)),
+                "unseen objects": evaluate_set("unseen", [s.name for s in unseen_objects(args.unseen)], estimator,
+                                               args, Path(folder))}
     result = {"arguments": {k: str(v) for k, v in vars(args).items()}, "minutes": (time.monotonic() - started) / 60,
               "sets": sets}
     print("\n| set | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° | random RotAcc@30° "

@@ -27,7 +27,7 @@ from idpose_core.cameras import spherical_to_c2w
 from idpose_core.demo_model import DemoPredictor
 from idpose_core.metrics import pair_errors
 from idpose_core.model_loading import load_predictor
-from idpose_core.pipeline import estimate_view_poses
+from idpose_core.pipeline import PipelineSettings, ViewInput, estimate_view_poses
 from idpose_core.solver import SolverConfig
 from idpose_core.synthetic.scenes import CAMERA_RADIUS, SceneRenderer, demo_objects, random_camera_spheres
 
@@ -67,7 +67,7 @@ def main() -> None:
     start = time.perf_counter()
     predictor, weights = demo_predictor(args.model_dir)
     load_seconds = time.perf_counter() - start
-    recommended = dict(getattr(predictor, "solver_defaults", {}))
+    recommended = dict(predictor.solver_defaults)
     print(f"loaded the demo model ({weights}) in {load_seconds:.2f} s; its recommended solver settings "
           f"(the pipeline applies them): {recommended}")
 
@@ -80,8 +80,9 @@ def main() -> None:
             for scene in range(args.scenes):
                 name, cameras, rgbs, alphas = render_scene(scene, count)
                 start = time.perf_counter()
-                result = estimate_view_poses(predictor, rgbs, alphas, config, anchor_polar=float(cameras[0, 0]),
-                                             object_distance=CAMERA_RADIUS)
+                views = [ViewInput(rgb, alpha) for rgb, alpha in zip(rgbs, alphas)]
+                # relative poses are scored: the anchor's polar angle stays unknown, as in the paper's grid
+                result = estimate_view_poses(predictor, views, PipelineSettings(config, CAMERA_RADIUS))
                 seconds = time.perf_counter() - start
                 c2w = spherical_to_c2w(cameras)
                 solved = result.solver_result

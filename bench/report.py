@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from bench.unit_costs import ISSUE_REFERENCE, RESULTS, STEP_COST_FILE
+from bench.unit_costs import QUIET_REFERENCE, RESULTS, STEP_COST_FILE
 
 README = Path(__file__).resolve().parent / "README.md"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
@@ -104,7 +104,7 @@ def counts_section(report: dict | None) -> list[str]:
     if not costs:
         return lines
     precisions = list(costs)
-    lines += ["", "Projected time: wall / CPU time from item 1's unit costs / the issue's quiet-machine figures "
+    lines += ["", "Projected time: wall / CPU time from item 1's unit costs / the reference quiet-machine figures "
               "(see below); (1/x) = the official time divided by ours.", "",
               "| n | preset | official | " + " | ".join(f"ours {p}" for p in precisions) + " |",
               "| ---: | --- | ---: | " + " | ".join("---:" for _ in precisions) + " |"]
@@ -123,8 +123,8 @@ def counts_section(report: dict | None) -> list[str]:
                 ("ours probe of 16", "ours_probe"), ("encode per view", "encode_per_view"),
                 ("official step", "official_step"), ("official probe", "official_probe"))) + "."]
     reference = costs[precisions[0]]["reference_seconds"]
-    quiet = ", ".join(f"{key} {value} s" for key, value in ISSUE_REFERENCE.items())
-    lines += ["", "Quiet-machine figures (the issue's): " + quiet
+    quiet = ", ".join(f"{key} {value} s" for key, value in QUIET_REFERENCE.items())
+    lines += ["", "Reference quiet-machine figures: " + quiet
               + "; our other units scaled from that float32 step by item 1's CPU-time ratios (e.g. "
               f"{precisions[0]} probe of 16: {reference['ours_probe']:.2f} s)."]
     return lines
@@ -181,9 +181,9 @@ def end_to_end_section(report: dict | None) -> list[str]:
 
 
 def targets_section(steps: dict | None, counts: dict | None, schedule: dict | None) -> list[str]:
-    """The issue's targets, checked against the figures above (yes / NO per way of costing and precision)."""
+    """The speed targets, checked against the figures above (yes / NO per way of costing and precision)."""
     lines = ["### Targets", "",
-             "| target | ours in | this run, wall | this run, CPU time | issue's quiet-machine figures |",
+             "| target | ours in | this run, wall | this run, CPU time | reference quiet-machine figures |",
              "| --- | --- | --- | --- | --- |"]
     costs = counts["unit_costs"] if counts else None
     if steps and costs:
@@ -220,7 +220,7 @@ def check(value: float, bound: float, prefix: str = "") -> str:
 def closing_note(steps: dict | None, counts: dict | None, schedule: dict | None, end_to_end: dict | None) -> list[str]:
     """The headline ratios in one paragraph per precision."""
     if not (steps and counts and counts["unit_costs"] and schedule):
-        return ["### Closing note", "", "Incomplete: run `python bench/run_all.py`."]
+        return ["### Summary", "", "Incomplete: run `python bench/run_all.py`."]
     two = next(row for row in counts["rows"] if row["n"] == 2)
     fast = {n: results["fast"]["rot_acc_15"] for n, results in schedule["results"].items()}
     default = {n: results["steps=600"]["rot_acc_15"] for n, results in schedule["results"].items()}
@@ -245,7 +245,7 @@ def closing_note(steps: dict | None, counts: dict | None, schedule: dict | None,
         parts.append("End to end, the demo model takes " + ", ".join(
             f"{row['median_seconds']:.0f} s (n = {row['n']}, {row['preset']})" for row in end_to_end["rows"])
                      + " per estimate on one thread.")
-    return ["### Closing note", "", " ".join(parts)]
+    return ["### Summary", "", " ".join(parts)]
 
 
 def render() -> str:

@@ -4,8 +4,8 @@ Ours: ``estimate_poses`` run with the render oracle as a cheap predictor at the 
 of each preset; the counts do not depend on the predictor. Official: ``bench/official_counts.py``
 (derived from its published algorithm). With ``bench/results/step_cost.json`` present, both are
 projected to full-size seconds on this CPU (``bench/unit_costs.py``), ours in each precision that run
-measured: wall and CPU seconds of that run, and the issue's quiet-machine reference figures
-(``ISSUE_REFERENCE``).
+measured: wall and CPU seconds of that run, and reference figures of a quiet machine
+(``QUIET_REFERENCE``).
 
 Usage (from the repository root): python -m bench.sample_counts [--views 2 4 6 8] [--presets default fast]
        [--precisions float32 bfloat16]

@@ -22,10 +22,10 @@ RESULTS = Path(__file__).resolve().parent / "results"
 STEP_COST_FILE = RESULTS / "step_cost.json"
 PROBE_SAMPLES = 16
 MEASURES = ("seconds", "cpu_seconds")
-# The issue's figures for this machine type when quiet (2 threads): one official step (3.1 s of it
+# Reference figures of a quiet 2-core CPU of the kind measured here (2 threads): one official step (3.1 s of it
 # re-encoding), one official probe, and a frozen float32 UNet step on cached conditioning (ours).
 # ``reference_costs`` scales our other units from that step by measured CPU-time ratios.
-ISSUE_REFERENCE = {"official_step": 9.35, "official_probe": 86.6, "ours_step": 2.15, "encode": 3.1}
+QUIET_REFERENCE = {"official_step": 9.35, "official_probe": 86.6, "ours_step": 2.15, "encode": 3.1}
 REFERENCE_PRECISION = "float32"
 
 
@@ -85,12 +85,12 @@ class UnitCosts:
 
 
 def reference_costs(measured_cpu: UnitCosts, measured_cpu_float32: UnitCosts) -> UnitCosts:
-    """Unit costs from ``ISSUE_REFERENCE``: our units = the issue's float32 step x measured CPU-time ratios.
+    """Unit costs from ``QUIET_REFERENCE``: our units = the reference float32 step x measured CPU-time ratios.
 
     ``measured_cpu`` holds our units in the wanted precision, ``measured_cpu_float32`` the float32 step
     they are scaled against (both CPU seconds of the same step_cost run).
     """
-    reference = ISSUE_REFERENCE
+    reference = QUIET_REFERENCE
     scale = reference["ours_step"] / measured_cpu_float32.ours_step
     return UnitCosts(ours_step=measured_cpu.ours_step * scale,
                      ours_adjust_sample=measured_cpu.ours_adjust_sample * scale,

@@ -1,6 +1,6 @@
 """Camera poses from spherical coordinates around the object, and the frames the node publishes in.
 
-Conventions (see DESIGN.md): world up is +z and every camera looks at the object centre (the origin)
+Conventions (README "Output frame"): world up is +z and every camera looks at the object centre (the origin)
 without roll. Camera-to-world matrices are ``(..., 4, 4)`` float64. The OpenGL/Blender camera axes are
 x right, y up, z backwards; the ROS optical axes (REP 103) are x right, y down, z forward. Relative
 spherical poses ``(d_polar, d_azimuth, d_radius)`` follow :mod:`idpose_core.spherical`.

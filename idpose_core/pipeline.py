@@ -1,11 +1,11 @@
-"""Buffered views -> camera poses in the anchor frame: the one path the node, the bag evaluator and the demo share.
+"""Views -> camera poses in the anchor frame: the one path the node, the bag evaluator and the demo share.
 
 preprocess_views -> estimate_poses -> anchor_frame_poses. No ROS here.
 """
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,9 +14,35 @@ import torch
 from idpose_core.cameras import anchor_frame_poses
 from idpose_core.predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessedViews, preprocess_views
-from idpose_core.solver import SolverConfig, SolverResult, estimate_poses
+from idpose_core.solver import Progress, SolverConfig, SolverResult, estimate_poses
 
 MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
+LEVEL_POLAR_DEG = 90.0  # the anchor's polar angle when nothing tells it: a level camera
+
+
+@dataclass(frozen=True)
+class ViewInput:
+    """One view as the pipeline takes it: ``rgb`` (H, W, 3) uint8 and, when the image has one, its
+    ``alpha`` (H, W) uint8 (the object mask; otherwise the mask is computed)."""
+
+    rgb: np.ndarray
+    alpha: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class PipelineSettings:
+    """How to estimate: the solver's settings (``solver.anchor_polar_deg`` is the anchor camera's polar
+    angle around the object, None = level), the anchor's ``object_distance`` (metres, the scale of the
+    published positions) and ``image_size``, the side of the preprocessed views the model sees."""
+
+    solver: SolverConfig
+    object_distance: float = 1.0
+    image_size: int = MODEL_IMAGE_SIZE
+
+    @property
+    def anchor_polar(self) -> float:
+        """The anchor's polar angle in radians."""
+        return float(np.radians(self.solver.anchor_polar_deg or LEVEL_POLAR_DEG))
 
 
 @dataclass(frozen=True)
@@ -28,34 +54,21 @@ class PipelineResult:
     preprocessed: PreprocessedViews
 
 
-def estimate_view_poses(
-    predictor: NoisePredictor,
-    rgbs: Sequence[np.ndarray],
-    alphas: Sequence[np.ndarray | None],
-    solver_config: SolverConfig,
-    anchor_polar: float,
-    object_distance: float,
-    progress: Callable[[str, int, int], None] | None = None,
-    cancel: threading.Event | None = None,
-    image_size: int = MODEL_IMAGE_SIZE,
-) -> PipelineResult:
+def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], settings: PipelineSettings,
+                        progress: Progress | None = None, cancel: threading.Event | None = None) -> PipelineResult:
     """Estimate the poses of N >= 2 views, the first one the anchor.
 
-    ``rgbs`` N images (H_i, W_i, 3) uint8, ``alphas`` N masks (H_i, W_i) uint8 or None (then
-    the mask is computed); ``anchor_polar`` (rad) is the anchor camera's polar angle around the
-    object and ``object_distance`` its distance to the object centre, which sets the metric
-    scale; ``image_size`` is the side of the preprocessed views the model sees. A predictor's
-    ``solver_defaults`` (the demo model's noise levels) fill settings left at the paper's defaults. Raises
-    ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and the solver's ``Cancelled``
-    when ``cancel`` is set.
+    The predictor's ``solver_defaults`` (the demo model's noise levels) fill the solver settings the
+    caller did not choose. Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and
+    the solver's ``Cancelled`` when ``cancel`` is set.
     """
-    if len(rgbs) < 2 or len(rgbs) != len(alphas):
-        raise ValueError(f"need at least 2 views with one alpha entry each, got {len(rgbs)} images "
-                         f"and {len(alphas)} alphas")
-    preprocessed = preprocess_views(list(rgbs), list(alphas), size=image_size)
-    solver_config = solver_config.with_recommended(getattr(predictor, "solver_defaults", {}))
+    if len(views) < 2:
+        raise ValueError(f"need at least 2 views, got {len(views)}")
+    preprocessed = preprocess_views([view.rgb for view in views], [view.alpha for view in views],
+                                    size=settings.image_size)
+    solver_config = settings.solver.with_recommended(predictor.solver_defaults)
     solved = estimate_poses(predictor, preprocessed.images, solver_config, progress=progress, cancel=cancel)
-    poses = anchor_frame_poses(solved.rel_poses, anchor_polar, object_distance)
+    poses = anchor_frame_poses(solved.rel_poses, settings.anchor_polar, settings.object_distance)
     return PipelineResult(poses=poses, solver_result=solved, preprocessed=preprocessed)
 
 

@@ -5,8 +5,9 @@ solver never knows which one it inverts.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 
@@ -34,9 +35,15 @@ class Views:
 
 @runtime_checkable
 class NoisePredictor(Protocol):
-    """A view-conditioned noise predictor ``f(z_t, x_ref, p, t)`` seen through two calls."""
+    """A view-conditioned noise predictor ``f(z_t, x_ref, p, t)`` seen through two calls.
+
+    ``num_train_timesteps`` is the length of its noise schedule; ``solver_defaults`` are the
+    ``SolverConfig`` settings it recommends (e.g. the noise levels a small model was trained at),
+    applied wherever the caller chose none (``SolverConfig.with_recommended``); empty for Zero-1-to-3.
+    """
 
     num_train_timesteps: int
+    solver_defaults: Mapping[str, Any]
 
     def encode(self, images: torch.Tensor) -> Views:
         """Images (N, 3, H, W) in [-1, 1] -> per-view ``Views``, computed once per estimate."""

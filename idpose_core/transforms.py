@@ -33,7 +33,7 @@ def quaternion_to_matrix(quaternion: np.ndarray) -> np.ndarray:
 
 
 def _matrix_to_quaternion_single(r: np.ndarray) -> np.ndarray:
-    """One rotation (3, 3) -> (x, y, z, w) with w >= 0, by the numerically safest diagonal (Shepperd)."""
+    """One rotation (3, 3) -> (x, y, z, w) by the numerically safest diagonal (Shepperd), canonically signed."""
     trace = np.trace(r)
     if trace > max(r[0, 0], r[1, 1], r[2, 2]):
         s = 2.0 * np.sqrt(1.0 + trace)
@@ -47,12 +47,19 @@ def _matrix_to_quaternion_single(r: np.ndarray) -> np.ndarray:
     else:
         s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
         q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, s / 4, (r[1, 0] - r[0, 1]) / s]
-    q = np.asarray(q)
-    return q if q[3] >= 0 else -q
+    return canonical_sign(np.asarray(q))
+
+
+def canonical_sign(q: np.ndarray) -> np.ndarray:
+    """The one of q, -q (both the same rotation) with w > 0, or, when w == 0, whose first non-zero of x, y, z
+    is positive: the convention ``msg_adapters.quaternions`` follows too, so both layers write the same numbers."""
+    leading = next((value for value in q[[3, 0, 1, 2]] if value != 0.0), 1.0)
+    return q if leading > 0 else -q
 
 
 def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` -> unit quaternions ``(..., 4)`` as (x, y, z, w), w >= 0."""
+    """Rotation matrices ``(..., 3, 3)`` -> unit quaternions ``(..., 4)`` as (x, y, z, w), signed by
+    ``canonical_sign``."""
     r = np.asarray(rotation, dtype=np.float64)
     flat = r.reshape(-1, 3, 3)
     quats = np.stack([_matrix_to_quaternion_single(m) for m in flat]) if len(flat) else np.zeros((0, 4))

@@ -45,11 +45,6 @@ def open_bag(path: str | Path) -> Iterator[AnyReader]:
         reader.close()
 
 
-def topic_types(reader: AnyReader) -> dict[str, str]:
-    """Every topic of the bag with its message type, e.g. ``{'/tf': 'tf2_msgs/msg/TFMessage'}``."""
-    return {name: info.msgtype or "(mixed types)" for name, info in reader.topics.items()}
-
-
 def describe_topics(reader: AnyReader) -> str:
     """The bag's topics, one ``name [type] (count)`` per line, for error messages."""
     lines = [f"  {name} [{info.msgtype}] ({info.msgcount} messages)" for name, info in sorted(reader.topics.items())]

@@ -1,7 +1,6 @@
 """The evaluation report: report.json (everything), report.md (the paper's Table 1 layout), camera plots."""
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,20 +13,14 @@ import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interacti
 import numpy as np  # noqa: E402
 
 from idpose_core.metrics import aggregate  # noqa: E402
-from idpose_ros.bag_views import BagViews  # noqa: E402
 
 if TYPE_CHECKING:
-    from idpose_ros.evaluate_bag import EvaluationRun
+    from idpose_ros.evaluate_bag import BagEvaluation
 
 RANDOM_METHOD = "random poses"
 COLUMNS = (("rot_acc_15", "RotAcc@15° ↑", True), ("rot_acc_30", "RotAcc@30° ↑", True),
            ("pos_acc_0.2", "PosAcc@0.2 ↑", True), ("mean_rot_err_deg", "mean rot. err. (°) ↓", False),
            ("mean_pos_err", "mean pos. err. ↓", False), ("pairs", "pairs", False))
-
-
-def ground_truth_source(args: argparse.Namespace) -> str:
-    return (f"PoseStamped on {args.gt_topic} (within {args.gt_tolerance:g} s)" if args.gt_topic
-            else f"/tf + /tf_static ({args.world_frame} -> image frame, at the image stamp)")
 
 
 def model_name(model: dict[str, Any]) -> str:
@@ -51,11 +44,11 @@ def markdown_table(methods: dict[str, dict[str, dict[str, float | int]]]) -> str
     return "\n".join([header, rule, *rows])
 
 
-def pooled_summaries(reports: Sequence[dict[str, Any]]) -> tuple[dict[str, float | int], dict[str, float | int]]:
-    """Over several reports (report.json contents): the model's summary of all their pairs, and the
-    random-pose baseline's RotAcc@15/30 and mean rotation error weighted by each report's guesses."""
-    model = aggregate([pair for report in reports for pair in report["pairs"]])["all"]
-    rows = [report["random_baseline"]["aggregates"]["all"] for report in reports]
+def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, float | int], dict[str, float | int]]:
+    """Over several evaluations: the model's summary of all their pairs, and the random-pose baseline's
+    RotAcc@15/30 and mean rotation error weighted by each evaluation's guesses."""
+    model = aggregate([pair for evaluation in evaluations for pair in evaluation.records])["all"]
+    rows = [evaluation.random_aggregates["all"] for evaluation in evaluations]
     guesses = sum(row["pairs"] for row in rows)
     random = {key: sum(row[key] * row["pairs"] for row in rows) / guesses
               for key in ("rot_acc_15", "rot_acc_30", "mean_rot_err_deg")}
@@ -83,40 +76,42 @@ def plot_cameras(path: Path, true_c2w: np.ndarray, pred_c2w: np.ndarray, views: 
     plt.close(figure)
 
 
-def write_report(out: Path, args: argparse.Namespace, values: dict[str, Any], model: dict[str, Any],
-                 bag: BagViews, run: EvaluationRun, seconds: float) -> str:
+def write_report(out: Path, evaluation: BagEvaluation) -> str:
     """Write report.json, report.md and cameras_<sample>.png into ``out``; returns the markdown table."""
     out.mkdir(parents=True, exist_ok=True)
+    run, views, protocol, gt = evaluation, evaluation.views, evaluation.protocol, evaluation.ground_truth
     aggregates, random_aggregates = run.aggregates, run.random_aggregates
+    estimator = run.estimator
+    values, preset, mode, model = (estimator[key] for key in ("node_parameters", "solver_preset", "mode", "model"))
     method = f"ID-Pose ({values['variant']})"
     table = markdown_table({method: aggregates, RANDOM_METHOD: random_aggregates})
-    views_by_id = {view.view_id: view for view in bag.views}
+    views_by_id = {view.view_id: view for view in views.views}
     report = {
-        "bag": str(args.bag), "image_topic": args.image_topic, "ground_truth": ground_truth_source(args),
-        "mode": args.mode, "model": model,
-        "node_parameters": {"solver_preset": args.preset, **values},
-        "protocol": {"samples": args.samples, "seed": args.seed, "pick_size": len(run.picks[0]),
-                     "view_counts": run.view_counts, "object_center": list(args.object_center), "up": list(args.up),
+        "bag": str(run.bag), "image_topic": gt.image_topic, "ground_truth": gt.description,
+        "mode": mode, "model": model,
+        "node_parameters": {"solver_preset": preset, **values},
+        "protocol": {"samples": protocol.samples, "seed": protocol.seed, "pick_size": len(run.picks[0]),
+                     "view_counts": run.view_counts, "object_center": list(gt.object_center), "up": list(gt.up),
                      "radius_unit": "relative radii in Zero-1-to-3 units: the anchor distance is 1.85"},
-        "views": {"total": len(bag.views), "usable": len(bag.pool), "skipped": [
+        "views": {"total": len(views.views), "usable": len(views.pool), "skipped": [
             {"view": view_id, "stamp": views_by_id[view_id].stamp * 1e-9, "reason": reason}
-            for view_id, reason in bag.skipped.items()]},
+            for view_id, reason in views.skipped.items()]},
         "picks": run.picks, "estimates": run.estimates, "pairs": run.records, "aggregates": aggregates,
         "random_baseline": {"guesses_per_pair": len(run.random_records) // max(len(run.records), 1),
                             "aggregates": random_aggregates},
-        "seconds": seconds,
+        "seconds": run.seconds,
     }
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     skipped = "".join(f"- view {item['view']} ({item['stamp']:.3f} s): {item['reason']}\n"
                       for item in report["views"]["skipped"])
     (out / "report.md").write_text(
-        f"# Pose evaluation of `{args.bag}`\n\n"
-        f"{method}, mode {args.mode}, model {model_name(model)}, solver preset {args.preset}. "
-        f"{args.samples} pick{'s' if args.samples != 1 else ''} of {report['protocol']['pick_size']} views "
-        f"(seed {args.seed}), "
+        f"# Pose evaluation of `{run.bag}`\n\n"
+        f"{method}, mode {mode}, model {model_name(model)}, solver preset {preset}. "
+        f"{protocol.samples} pick{'s' if protocol.samples != 1 else ''} of {report['protocol']['pick_size']} views "
+        f"(seed {protocol.seed}), "
         f"evaluated on their first {', '.join(map(str, run.view_counts))} views; the first view is the anchor.\n"
-        f"Ground truth: {report['ground_truth']}. Views on {args.image_topic}: {len(bag.views)}, "
-        f"usable {len(bag.pool)}, skipped {len(bag.skipped)}.\n\n"
+        f"Ground truth: {report['ground_truth']}. Views on {gt.image_topic}: {len(views.views)}, "
+        f"usable {len(views.pool)}, skipped {len(views.skipped)}.\n\n"
         f"{table}\n\n"
         "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance. "
         f"{RANDOM_METHOD}: each pair's target camera guessed uniformly on the sphere at the anchor's distance, "

@@ -1,20 +1,26 @@
 """`./run demo`: the main job end to end on what ships with the package.
 
 Evaluates every shipped demo bag (``data/demo_bags/<object>``: rendered views of one demo object
-with ground-truth /tf) offline with the embedded demo model, n = 2, the `fast` solver preset (the
-paper's schedule, `--preset default`, takes about twice as long), prints each bag's table, then one
-summary across the demo objects beside the random-pose baseline. Extra arguments go to every
-`evaluate_bag` run (e.g. `--model-path ~/models/zero123-xl` for real weights).
+with ground-truth /tf) with the embedded demo model, loaded once, n = 2, the `fast` solver preset
+(the paper's schedule, `--preset default`, takes about twice as long), prints each bag's table,
+then one summary across the demo objects beside the random-pose baseline. The model and solver
+options of `evaluate_bag` apply (e.g. `--model-path ~/models/zero123-xl` for real weights).
 """
-import json
+from __future__ import annotations
+
+import argparse
 import sys
 from pathlib import Path
 
-from idpose_ros.bag_report import pooled_summaries
-from idpose_ros.evaluate_bag import main as evaluate_bag
+from idpose_core.zero123 import ModelLoadError
+from idpose_ros.bag_io import BagError
+from idpose_ros.bag_report import pooled_summaries, write_report
+from idpose_ros.estimators import add_estimator_arguments, estimator_options, make_estimator
+from idpose_ros.evaluate_bag import BagEvaluation, EvaluationProtocol, evaluate_bag
+from idpose_ros.replay import ReplayError
 
 DEMO_BAGS = Path(__file__).resolve().parents[1] / "data" / "demo_bags"
-DEMO_ARGS = ["--mode", "offline", "--n", "2", "--samples", "1", "--preset", "fast"]
+PROTOCOL = EvaluationProtocol(samples=1, seed=0, view_counts=(2,))
 OUT = Path("demo_output")
 
 
@@ -23,14 +29,14 @@ def demo_bags() -> list[Path]:
     return sorted(path for path in DEMO_BAGS.iterdir() if (path / "metadata.yaml").is_file())
 
 
-def summary_table(reports: dict[str, dict]) -> str:
+def summary_table(evaluations: dict[str, BagEvaluation]) -> str:
     """One row per object and one for all pairs: RotAcc@15/30 and mean rotation error, model vs random poses."""
     lines = ["| object | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° "
              "| random RotAcc@30° |",
              "|---|---|---|---|---|---|---|"]
-    rows = {name: (report["aggregates"]["all"], report["random_baseline"]["aggregates"]["all"])
-            for name, report in reports.items()}
-    rows["all"] = pooled_summaries(list(reports.values()))
+    rows = {name: (evaluation.aggregates["all"], evaluation.random_aggregates["all"])
+            for name, evaluation in evaluations.items()}
+    rows["all"] = pooled_summaries(list(evaluations.values()))
     for name, (model, baseline) in rows.items():
         lines.append(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | "
                      f"{100 * model['rot_acc_30']:.1f} | "
@@ -40,19 +46,28 @@ def summary_table(reports: dict[str, dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    extra = sys.argv[1:] if argv is None else argv
+    parser = argparse.ArgumentParser(prog="demo", description=__doc__.split("\n\n")[1])
+    add_estimator_arguments(parser, preset="fast")
+    args = parser.parse_args(argv)
     bags = demo_bags()
-    print(f"idpose_ros demo: evaluating {len(bags)} shipped bags ({', '.join(b.name for b in bags)}) offline, "
-          f"n = 2, fast preset, one estimate each; reports in ./{OUT}/<object>", flush=True)
-    reports = {}
-    for bag in bags:
-        print(f"\n== {bag.name} ==", flush=True)
-        code = evaluate_bag([str(bag), *DEMO_ARGS, "--out", str(OUT / bag.name), *extra])
-        if code:
-            return code
-        reports[bag.name] = json.loads((OUT / bag.name / "report.json").read_text())
+    print(f"idpose_ros demo: evaluating {len(bags)} shipped bags ({', '.join(b.name for b in bags)}), "
+          f"n = 2, {args.preset} preset, one estimate each; reports in ./{OUT}/<object>", flush=True)
+    evaluations: dict[str, BagEvaluation] = {}
+    estimator = None
+    try:
+        estimator = make_estimator(estimator_options(args))
+        for bag in bags:
+            print(f"\n== {bag.name} ==", flush=True)
+            evaluations[bag.name] = evaluate_bag(bag, estimator, protocol=PROTOCOL)
+            print(write_report(OUT / bag.name, evaluations[bag.name]), flush=True)
+    except (BagError, ModelLoadError, ReplayError, ValueError) as err:
+        print(f"demo: error: {err}", file=sys.stderr)
+        return 2
+    finally:
+        if estimator is not None:
+            estimator.close()
     print("\nAll demo objects (n = 2; random poses: each target camera guessed uniformly on the sphere):\n"
-          + summary_table(reports), flush=True)
+          + summary_table(evaluations), flush=True)
     return 0
 
 

@@ -11,9 +11,11 @@ STATUS_NAME = "idpose_estimator: estimation"
 
 @dataclass(frozen=True)
 class EstimatorStatus:
-    """What the node reports: ``state`` is idle, estimating or failed; ``model`` as ``ModelHolder.describe``."""
+    """What the node reports: ``state`` is idle, estimating or failed; ``run_id`` numbers the running or the
+    last estimate (0 before the first), as ``~/estimate`` answered it; ``model`` as ``ModelHolder.describe``."""
 
     state: str
+    run_id: int
     views_buffered: int
     max_views: int
     model: str
@@ -42,6 +44,7 @@ def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> 
     """One DiagnosticStatus with the state, progress, buffer, model, last run and per-view scores."""
     values = {
         "state": status.state,
+        "run_id": str(status.run_id),
         "stage": status.stage,
         "progress_percent": f"{status.progress_percent:.1f}",
         "views_buffered": str(status.views_buffered),

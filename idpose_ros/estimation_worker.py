@@ -11,8 +11,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-ProgressFn = Callable[[str, int, int], None]
-Job = Callable[[ProgressFn, threading.Event], Any]
+from idpose_core.solver import Progress
+
+Job = Callable[[Progress, threading.Event], Any]
 
 LOG_EVERY_PERCENT = 10
 
@@ -29,7 +30,7 @@ class Outcome:
 
 
 @dataclass(frozen=True)
-class Progress:
+class JobProgress:
     """The running job's current stage and how far it is through that stage."""
 
     task: str
@@ -46,11 +47,11 @@ class EstimationWorker:
         self._thread: threading.Thread | None = None
         self._active = False
         self._cancel = threading.Event()
-        self._progress: Progress | None = None
+        self._progress: JobProgress | None = None
         self._logged_step = -1
 
     @property
-    def progress(self) -> Progress | None:
+    def progress(self) -> JobProgress | None:
         """None when idle."""
         return self._progress
 
@@ -69,7 +70,7 @@ class EstimationWorker:
             if self._active:
                 return f"busy: {self._progress.task if self._progress else 'a job'} is running"
             self._cancel = threading.Event()
-            self._progress = Progress(task, "starting", 0.0)
+            self._progress = JobProgress(task, "starting", 0.0)
             self._logged_step = -1
             self._active = True
             self._thread = threading.Thread(
@@ -97,7 +98,7 @@ class EstimationWorker:
         percent = 100.0 * done / total if total > 0 else 100.0
         step = int(percent // LOG_EVERY_PERCENT)
         previous = self._progress
-        self._progress = Progress(task, stage, percent)
+        self._progress = JobProgress(task, stage, percent)
         if previous is None or previous.stage != stage:
             self._logged_step = -1
         if step > self._logged_step:

@@ -7,7 +7,6 @@ image callbacks, services and diagnostics responsive.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import signal
 import sys
@@ -31,12 +30,13 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from idpose_core.model_loading import load_predictor
-from idpose_core.pipeline import PipelineResult, estimate_view_poses, views_mosaic
+from idpose_core.pipeline import PipelineResult, ViewInput, estimate_view_poses, views_mosaic
 from idpose_core.predictor import NoisePredictor
+from idpose_core.solver import Progress
 from idpose_ros.diagnostics import EstimatorStatus, diagnostic_array
-from idpose_ros.estimation_worker import EstimationWorker, Outcome, ProgressFn
+from idpose_ros.estimation_worker import EstimationWorker, Outcome
 from idpose_ros.model_holder import ModelHolder
-from idpose_ros.parameters import current_values, declare_parameters, node_settings, solver_config
+from idpose_ros.parameters import current_values, declare_parameters, node_settings, pipeline_settings
 from idpose_ros.view_buffer import CaptureRefused, View, ViewBuffer
 from msg_adapters import (
     AdapterError,
@@ -73,6 +73,7 @@ class EstimatorNode(Node):
         self._model = ModelHolder(self._load_model, self._model_unavailable)
         self._status_lock = threading.Lock()
         self._state = "idle"
+        self._run_id = 0  # of the running or the last estimate; ~/estimate answers it, /diagnostics carries it
         self._last_error = ""
         self._last_run_seconds: float | None = None
         self._scores: tuple[float, ...] = ()
@@ -107,10 +108,9 @@ class EstimatorNode(Node):
         started = time.monotonic()
         predictor = load_predictor(settings.model_path, device=settings.device, precision=settings.precision)
         self.get_logger().info(f"model loaded in {time.monotonic() - started:.1f} s")
-        recommended = getattr(predictor, "solver_defaults", {})
-        if recommended:
-            self.get_logger().info(f"the model recommends solver settings {recommended}: they replace the "
-                                   "paper's defaults where a parameter is left at its default")
+        if predictor.solver_defaults:
+            self.get_logger().info(f"the model recommends solver settings {dict(predictor.solver_defaults)}: they "
+                                   "apply to the settings the node does not expose as parameters")
         return predictor
 
     def _model_unavailable(self, reason: str) -> None:
@@ -137,7 +137,7 @@ class EstimatorNode(Node):
             self.get_logger().error(f"dropped a message on {topic} that failed to decode: {type(exc).__name__}: {exc}",
                                     throttle_duration_sec=THROTTLE)
             return
-        view = View(rgb=rgb, alpha=alpha, frame_id=header.frame_id, stamp=header.stamp, source=source)
+        view = View(ViewInput(rgb, alpha), frame_id=header.frame_id, stamp=header.stamp, source=source)
         settings = node_settings(current_values(self))
         if settings.capture_mode != "auto":
             self._buffer.observe(view)
@@ -152,10 +152,11 @@ class EstimatorNode(Node):
 
     def _kept(self, view: View, count: int, views_per_estimate: int) -> None:
         role = "anchor" if count == 1 else f"view {count}"
-        self.get_logger().info(f"kept {role} ({view.source}, {view.rgb.shape[1]}x{view.rgb.shape[0]}, "
+        height, width = view.input.rgb.shape[:2]
+        self.get_logger().info(f"kept {role} ({view.source}, {width}x{height}, "
                                f"frame '{view.frame_id}'), {count} buffered")
         if views_per_estimate > 0 and count == views_per_estimate:
-            refusal = self._start_estimate()
+            _, refusal = self._start_estimate()
             if refusal:
                 self.get_logger().warning(f"automatic estimate not started: {refusal}")
 
@@ -174,9 +175,9 @@ class EstimatorNode(Node):
         return response
 
     def _estimate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        refusal = self._start_estimate()
+        run_id, refusal = self._start_estimate()
         response.success = refusal is None
-        response.message = refusal or f"estimating the poses of {len(self._buffer)} views"
+        response.message = refusal or f"estimating the poses of {len(self._buffer)} views (run {run_id})"
         return response
 
     def _cancel(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -200,22 +201,20 @@ class EstimatorNode(Node):
         return response
 
     # ----- estimation ----------------------------------------------------------------------------------------------
-    def _start_estimate(self) -> str | None:
-        """Start an estimate on the buffered views; None when started, else why not."""
+    def _start_estimate(self) -> tuple[int | None, str | None]:
+        """Start an estimate on the buffered views: (its run id, None) when started, else (None, why not)."""
         if self._model.problem:
-            return self._model.problem
+            return None, self._model.problem
         views = self._buffer.snapshot()
         if len(views) < 2:
-            return f"need at least 2 buffered views to estimate, have {len(views)}"
+            return None, f"need at least 2 buffered views to estimate, have {len(views)}"
         values = current_values(self)
-        settings, config = node_settings(values), solver_config(values)
+        settings, pipeline = node_settings(values), pipeline_settings(values)
         frame_id = settings.anchor_frame or views[0].frame_id
 
-        def job(progress: ProgressFn, cancel: threading.Event) -> PipelineResult:
+        def job(progress: Progress, cancel: threading.Event) -> PipelineResult:
             predictor = self._model.get()  # waits for a start-up load still running
-            return estimate_view_poses(predictor, [v.rgb for v in views], [v.alpha for v in views], config,
-                                       math.radians(settings.anchor_polar_deg), settings.object_distance,
-                                       progress=progress, cancel=cancel, image_size=settings.image_size)
+            return estimate_view_poses(predictor, [view.input for view in views], pipeline, progress, cancel)
 
         def on_done(outcome: Outcome) -> None:
             self._on_estimated(outcome, views, frame_id, settings.object_distance)
@@ -223,11 +222,13 @@ class EstimatorNode(Node):
         with self._status_lock:  # held so that a run that ends at once cannot be overwritten by "estimating"
             refusal = self._worker.start("estimate", job, on_done)
             if refusal is None:
-                self._state, self._last_error = "estimating", ""
-        if refusal is None:
-            self.get_logger().info(f"estimating the poses of {len(views)} views ({config.variant}, "
-                                   f"{config.refine_steps_per_view} refinement steps per view)")
-        return refusal
+                self._run_id += 1
+                self._state, self._last_error, run_id = "estimating", "", self._run_id
+        if refusal is not None:
+            return None, refusal
+        self.get_logger().info(f"estimating the poses of {len(views)} views, run {run_id} ({pipeline.solver.variant}, "
+                               f"{pipeline.solver.refine_steps_per_view} refinement steps per view)")
+        return run_id, None
 
     def _on_estimated(self, outcome: Outcome, views: list[View], frame_id: str, object_distance: float) -> None:
         if outcome.status == "cancelled":
@@ -272,7 +273,8 @@ class EstimatorNode(Node):
         progress = self._worker.progress
         with self._status_lock:
             return EstimatorStatus(
-                state=self._state, views_buffered=len(self._buffer), max_views=self._buffer.max_views,
+                state=self._state, run_id=self._run_id, views_buffered=len(self._buffer),
+                max_views=self._buffer.max_views,
                 model=self._model.describe(),
                 stage=progress.stage if progress else "", progress_percent=progress.percent if progress else 0.0,
                 last_error=self._last_error, last_run_seconds=self._last_run_seconds,

@@ -13,6 +13,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from idpose_core.pipeline import PipelineSettings
 from idpose_core.solver import SolverConfig
 
 INT32_MAX = 2**31 - 1
@@ -125,12 +126,19 @@ def problem(values: dict[str, Any]) -> str | None:
 
 
 def solver_config(values: dict[str, Any]) -> SolverConfig:
-    """The SolverConfig these parameter values describe (fields not exposed keep their defaults).
+    """The SolverConfig these parameter values describe.
 
-    The anchor's known polar angle also narrows the solver's relative polar candidates.
+    Every exposed setting counts as chosen (a ROS parameter always has a value), so a model's
+    recommendations fill only the settings the node does not expose. The anchor's known polar angle
+    also narrows the solver's relative polar candidates.
     """
-    return dataclasses.replace(SolverConfig(), anchor_polar_deg=values["anchor_polar_deg"],
-                               **{name: values[name] for name in SOLVER_PARAMETERS})
+    return SolverConfig(anchor_polar_deg=values["anchor_polar_deg"],
+                        **{name: values[name] for name in SOLVER_PARAMETERS})
+
+
+def pipeline_settings(values: dict[str, Any]) -> PipelineSettings:
+    """What one estimate runs on, from the node's parameter values: solver, object distance, image size."""
+    return PipelineSettings(solver_config(values), values["object_distance"], values["image_size"])
 
 
 def node_settings(values: dict[str, Any]) -> NodeSettings:

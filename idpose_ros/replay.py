@@ -3,12 +3,14 @@
 Per view set: set the node's parameters (solver settings, anchor polar angle, object distance,
 ``capture_mode`` on_request), ``~/reset``, then for each image publish it on the node's ``image``
 (or ``image/compressed``) topic and call ``~/capture``; then ``~/estimate``, and read the poses
-from ``~/poses`` and the per-view scores and ambiguity flags from ``/diagnostics``. The node runs in
+from ``~/poses`` and the per-view scores and ambiguity flags from ``/diagnostics``, once the status
+carries the ``run_id`` that ``~/estimate`` answered. The node runs in
 this process (started here, model loaded by the node) or is a running node named by ``node_name``.
 """
 from __future__ import annotations
 
 import os
+import re
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -27,6 +29,7 @@ from sensor_msgs.msg import CompressedImage, Image
 from std_srvs.srv import Trigger
 
 from idpose_core.evaluation import PICK_SIZE, ViewSetEstimate
+from idpose_core.solver import Progress
 from idpose_ros.diagnostics import STATUS_NAME
 from idpose_ros.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
 from msg_adapters import pose_to_matrix
@@ -37,6 +40,7 @@ CAPTURE_RETRY = 0.05  # s between two ~/capture attempts while the image is on i
 REPUBLISH_AFTER = 1.0  # s without the node receiving an image before it is published again
 IN_PROCESS_DIAGNOSTICS_PERIOD = 0.2  # s, for a node started here
 # Node parameters a replay sets besides the solver's; a running node gets its own values back on close().
+RUN_ID = re.compile(r"\(run (\d+)\)$")  # how the ~/estimate answer ends: "... (run 7)"
 REPLAY_PARAMETERS = ("anchor_polar_deg", "object_distance", "capture_mode", "views_per_estimate", "max_views",
                      "anchor_frame")
 
@@ -61,7 +65,9 @@ class ReplayEstimator:
     """A ``ViewSetEstimator`` that goes through the estimator node; call ``close()`` when done."""
 
     def __init__(self, values: dict[str, Any], model_path: str = "", device: str = "auto",
-                 precision: str = "auto", node_name: str | None = None, timeout: float = 3600.0):
+                 precision: str = "auto", node_name: str | None = None, timeout: float = 3600.0,
+                 preset: str = "default"):
+        """``values``: the node parameters every estimate runs on (``preset`` names where they came from)."""
         self.values, self.timeout = values, timeout
         self._context = rclpy.Context()
         rclpy.init(context=self._context)
@@ -84,7 +90,6 @@ class ReplayEstimator:
         self._lock = threading.Lock()
         self._poses: PoseArray | None = None
         self._status: dict[str, str] | None = None
-        self._status_serial = 0
         self._publishers = {
             Image: self._client.create_publisher(Image, f"{namespace}/image", qos_profile_sensor_data),
             CompressedImage: self._client.create_publisher(CompressedImage, f"{namespace}/image/compressed",
@@ -104,8 +109,10 @@ class ReplayEstimator:
                                       f"(waited {CONNECT_TIMEOUT:g} s; is --node its fully qualified name?)")
             if not self._parameters.wait_for_services(timeout_sec=CONNECT_TIMEOUT):
                 raise ReplayError(f"the parameter services of {self.node_name} do not answer")
-            self._wait_until_idle(self.timeout, None)
-            self.model = {"node": self.node_name, **self._get_parameters(("model_path", "device", "precision"))}
+            self._wait_for_status(lambda status: status["state"] != "estimating", self.timeout,
+                                  "finish its running estimate")
+            model = {"node": self.node_name, **self._get_parameters(("model_path", "device", "precision"))}
+            self.description = {"mode": "replay", "model": model, "solver_preset": preset}
             self._restore = {} if self._estimator else self._get_parameters([*self.values, *REPLAY_PARAMETERS])
         except BaseException:
             self.close()
@@ -121,33 +128,25 @@ class ReplayEstimator:
             if status.name == STATUS_NAME and status.hardware_id.startswith(f"{self.node_name} ("):
                 with self._lock:
                     self._status = {item.key: item.value for item in status.values}
-                    self._status_serial += 1
 
-    def _latest_status(self) -> tuple[int, dict[str, str] | None]:
+    def _latest_status(self) -> dict[str, str] | None:
         with self._lock:
-            return self._status_serial, self._status
+            return self._status
 
-    def _wait_until_idle(self, timeout: float, progress: Callable[[str, int, int], None] | None,
-                         after: int = 0, finished: Callable[[], bool] | None = None) -> dict[str, str]:
-        """The first idle /diagnostics status after serial ``after`` (and, given ``finished``, published after
-        ``finished()`` first held: an idle status sent while the estimate request was in flight is stale);
-        ReplayError on failure or timeout."""
+    def _wait_for_status(self, done: Callable[[dict[str, str]], bool], timeout: float, what: str,
+                         progress: Progress | None = None) -> dict[str, str]:
+        """The first /diagnostics status for which ``done`` holds; progress reported on the way. ReplayError
+        on timeout."""
         deadline = time.monotonic() + timeout
-        idle_after = None if finished else after
         while time.monotonic() < deadline:
-            serial, status = self._latest_status()
-            if idle_after is None and finished():
-                idle_after = serial
-            if status is not None and serial > after:
-                if status["state"] == "idle" and idle_after is not None and serial > idle_after:
+            status = self._latest_status()
+            if status is not None:
+                if done(status):
                     return status
-                if status["state"] == "failed":
-                    raise ReplayError(f"the estimator node failed: {status['last_error'] or status['model']}")
                 if progress is not None and status["state"] == "estimating":
                     progress(status["stage"], round(float(status["progress_percent"])), 100)
             time.sleep(0.02)
-        raise ReplayError(f"the estimator node {self.node_name} did not {'publish its poses and ' if finished else ''}"
-                          f"become idle within {timeout:g} s")
+        raise ReplayError(f"the estimator node {self.node_name} did not {what} within {timeout:g} s")
 
     # ----- services and parameters ---------------------------------------------------------------------------------
     def _call(self, name: str) -> Trigger.Response:
@@ -186,7 +185,7 @@ class ReplayEstimator:
 
     # ----- one view set ---------------------------------------------------------------------------------------------
     def __call__(self, messages: Sequence[Image | CompressedImage], anchor_polar_deg: float, object_distance: float,
-                 progress: Callable[[str, int, int], None] | None = None) -> ViewSetEstimate:
+                 progress: Progress | None = None) -> ViewSetEstimate:
         self._set_parameters({**self.values, "anchor_polar_deg": float(anchor_polar_deg),
                               "object_distance": float(object_distance), "capture_mode": "on_request",
                               "views_per_estimate": 0, "max_views": PICK_SIZE, "anchor_frame": ""})
@@ -195,18 +194,22 @@ class ReplayEstimator:
             self._capture(message)
         with self._lock:
             self._poses = None
-            after = self._status_serial
         response = self._call("estimate")
-        if not response.success:
+        run = RUN_ID.search(response.message)
+        if not response.success or run is None:
             raise ReplayError(f"{self.node_name}/estimate refused: {response.message}")
+        status = self._wait_for_status(lambda status: status["run_id"] == run[1] and status["state"] != "estimating",
+                                       self.timeout, f"finish estimate run {run[1]}", progress)
+        if status["state"] == "failed" or status["last_error"]:
+            raise ReplayError(f"the estimator node's run {run[1]} failed: {status['last_error'] or status['model']}")
         anchor_stamp = _stamp_ns(messages[0].header.stamp)
 
-        def published() -> bool:
+        def published() -> bool:  # the poses go out before the status says the run is over
             with self._lock:
                 return (self._poses is not None and len(self._poses.poses) == len(messages)
                         and _stamp_ns(self._poses.header.stamp) == anchor_stamp)
 
-        status = self._wait_until_idle(self.timeout, progress, after, finished=published)
+        _wait(published, SERVICE_TIMEOUT, f"the poses of run {run[1]} on {self.node_name}/poses")
         with self._lock:
             poses = np.stack([pose_to_matrix(pose) for pose in self._poses.poses])
         views = range(1, len(messages))

@@ -7,16 +7,16 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass
 
-import numpy as np
 from builtin_interfaces.msg import Time
+
+from idpose_core.pipeline import ViewInput
 
 
 @dataclass(frozen=True)
 class View:
-    """One decoded image: RGB (H, W, 3) uint8, optional alpha (H, W) uint8, and where/when it was taken."""
+    """One decoded view as the pipeline takes it, and where/when it was taken."""
 
-    rgb: np.ndarray
-    alpha: np.ndarray | None
+    input: ViewInput
     frame_id: str
     stamp: Time
     source: str  # e.g. "Image rgb8" or "CompressedImage png", for log lines

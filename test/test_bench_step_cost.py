@@ -53,7 +53,7 @@ def test_all_costs_gives_wall_cpu_and_reference_units_per_precision(tiny_run):
     assert set(costs) == {"float32", "bfloat16"}
     for units in costs.values():
         assert set(units) == {"seconds", "cpu_seconds", "reference_seconds"}
-    # the reference float32 step is the figure; bfloat16 keeps its measured ratio to it
+    # the reference float32 step is the quiet reference figure; bfloat16 keeps its measured ratio to it
     reference, cpu = costs["bfloat16"]["reference_seconds"], costs["bfloat16"]["cpu_seconds"]
     assert costs["float32"]["reference_seconds"].ours_step == pytest.approx(2.15)
     assert reference.ours_step / 2.15 == pytest.approx(cpu.ours_step / costs["float32"]["cpu_seconds"].ours_step)

@@ -29,7 +29,7 @@ from msg_adapters import array_to_image
 ROOT = Path(__file__).resolve().parents[1]
 NAMESPACE = "/console"
 NODE = f"{NAMESPACE}/idpose_estimator"
-SHUTDOWN_LIMIT = 2.0  # seconds, the requirement for Ctrl-C during an estimate
+SHUTDOWN_LIMIT = 2.0  # seconds: Ctrl-C during an estimate must end the node within this
 FAST = {"image_size": 32, "azimuth_candidates": 2, "probe_batch": 1, "adjust_steps": 0, "keep_top": 1,
         "refine_steps_per_view": 2, "average_last": 1, "runner_up_steps": 1}
 

@@ -2,7 +2,7 @@
 
 Every test talks to the node through ROS only (a probe node publishes images, calls services
 and subscribes to the outputs); ``EstimatorNode.status()`` is read to wait for images to land.
-Reduced for speed: the tiny random Zero-1-to-3 (issue D) on views preprocessed at 32 px (its
+Reduced for speed: the tiny random Zero-1-to-3 on views preprocessed at 32 px (its
 native size), solver with 2 azimuth candidates, probe batch 1, no adjustment steps, keep 1,
 2 refinement steps and 1 runner-up step per view (the paper: 8, 16, 10, 5, 600, 100); torch on
 one thread (test/conftest.py). Nothing here checks accuracy: the tiny model is random (see test_pipeline.py).
@@ -33,9 +33,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from idpose_core.model_loading import load_predictor
-from idpose_core.pipeline import estimate_view_poses
+from idpose_core.pipeline import ViewInput, estimate_view_poses
 from idpose_ros.estimator_node import RESULT_QOS, EstimatorNode
-from idpose_ros.parameters import current_values, solver_config
+from idpose_ros.parameters import current_values, pipeline_settings
 from msg_adapters import array_to_image, compressed_to_rgb, image_to_rgb, pose_to_matrix
 
 TIMEOUT = 60.0
@@ -174,11 +174,10 @@ def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harnes
     np.testing.assert_allclose(matrices[0], np.eye(4), atol=1e-9)
 
     # The node ran exactly the shared pipeline on exactly these decoded views, in capture order.
-    decoded = [image_to_rgb(m) if isinstance(m, Image) else compressed_to_rgb(m) for m in messages]
-    values = current_values(h.node)
-    expected = estimate_view_poses(load_predictor(str(tiny_model_dir)), [rgb for rgb, _ in decoded],
-                                   [alpha for _, alpha in decoded], solver_config(values),
-                                   np.radians(values["anchor_polar_deg"]), values["object_distance"], image_size=32)
+    decoded = [ViewInput(*(image_to_rgb(m) if isinstance(m, Image) else compressed_to_rgb(m))) for m in messages]
+    settings = pipeline_settings(current_values(h.node))
+    assert settings.image_size == 32
+    expected = estimate_view_poses(load_predictor(str(tiny_model_dir)), decoded, settings)
     np.testing.assert_allclose(matrices, expected.poses, atol=1e-6)
 
     markers = wait_for(lambda: h.markers, "the markers")[0]

@@ -3,11 +3,12 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 
+from idpose_core.pipeline import ViewInput
 from idpose_ros.view_buffer import CaptureRefused, View, ViewBuffer
 
 
 def view(index: int) -> View:
-    return View(rgb=np.full((4, 5, 3), index, np.uint8), alpha=None, frame_id=f"cam{index}",
+    return View(ViewInput(np.full((4, 5, 3), index, np.uint8)), frame_id=f"cam{index}",
                 stamp=Time(sec=index), source="Image rgb8")
 
 

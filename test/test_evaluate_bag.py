@@ -16,14 +16,20 @@ import torch
 
 from idpose_core.synthetic.render_oracle import RenderOracle
 from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, random_camera_spheres
-from idpose_ros import estimator_node, evaluate_bag
+from idpose_ros import estimator_node, estimators, evaluate_bag
 from idpose_ros.bag_report import write_report
-from idpose_ros.bag_views import read_bag_views
-from idpose_ros.evaluate_bag import OfflineEstimator, node_values, parse_args, plan_evaluation, run_evaluation
+from idpose_ros.estimators import EstimatorOptions, OfflineEstimator
+from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions
 from idpose_ros.make_synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, make_bag
 
 SEED, VIEWS, SIZE = 5, 10, 64
-ORACLE_SOLVER = ["adjust_lr=1.0", "refine_lr=0.1", "refine_steps_per_view=30"]
+ORACLE_SOLVER = ("adjust_lr=1.0", "refine_lr=0.1", "refine_steps_per_view=30")
+ORACLE_OPTIONS = EstimatorOptions(preset="fast", solver_params=ORACLE_SOLVER)
+
+
+def node_values(preset: str, variant: str | None, overrides, image_size: int = 256) -> dict:
+    return EstimatorOptions(preset=preset, variant=variant, solver_params=tuple(overrides),
+                            image_size=image_size).node_values()
 
 
 def thumbnail(rgb: np.ndarray) -> np.ndarray:
@@ -41,6 +47,7 @@ class IdentifyingOracle:
         with SceneRenderer(spec, image_size=size) as renderer:
             self.thumbnails = np.stack([thumbnail(renderer.render(*sph)[0]) for sph in cameras_sph])
         self.num_train_timesteps = RenderOracle.num_train_timesteps
+        self.solver_defaults = RenderOracle.solver_defaults
         self.oracle: RenderOracle | None = None
         self.identified: list[list[int]] = []
 
@@ -72,15 +79,13 @@ def oracle():
 
 @pytest.fixture(scope="module")
 def oracle_run(demo_bag, oracle):
-    bag = read_bag_views(demo_bag, IMAGE_TOPIC)
-    estimator = OfflineEstimator(oracle, node_values("fast", None, ORACLE_SOLVER))
-    run = plan_evaluation(bag, IMAGE_TOPIC, samples=2, seed=0, view_counts=(2, 4, 6, 8))
-    run_evaluation(demo_bag, IMAGE_TOPIC, bag, run, estimator, center=(0, 0, 0), up=(0, 0, 1), show_progress=False)
-    return bag, run
+    estimator = OfflineEstimator(oracle, ORACLE_OPTIONS.node_values(), {"predictor": "oracle"}, "fast")
+    return evaluate_bag.evaluate_bag(demo_bag, estimator, GroundTruthOptions(IMAGE_TOPIC),
+                                     EvaluationProtocol(samples=2, seed=0), show_progress=False)
 
 
 def test_the_oracle_scores_100_percent_on_every_view_count(oracle_run, oracle):
-    _, run = oracle_run
+    run = oracle_run
     assert len(run.picks) == 2 and run.picks[0] != run.picks[1]
     assert all(len(pick) == 8 and pick == sorted(pick) for pick in run.picks)  # capture order
     # the oracle saw exactly the views of each estimate, in order: images and ids travel together
@@ -97,7 +102,7 @@ def test_the_oracle_scores_100_percent_on_every_view_count(oracle_run, oracle):
 
 def test_random_baseline_scores_uniform_guesses_of_the_same_pairs(oracle_run):
     """A uniform guess lands within 30 deg of a camera about 1 - cos(30 deg) / 2 = 6.7 % of the time."""
-    _, run = oracle_run
+    run = oracle_run
     random = run.random_aggregates
     assert list(random) == ["2", "4", "6", "8", "all"]
     assert [random[k]["pairs"] for k in random] == [200 * p for p in (2, 6, 10, 14, 32)]
@@ -107,13 +112,11 @@ def test_random_baseline_scores_uniform_guesses_of_the_same_pairs(oracle_run):
 
 def test_tf_and_pose_topic_ground_truth_give_the_same_numbers(demo_bag, oracle):
     """Same picks, same estimates: the two ground-truth sources score identically (one 2-view set each)."""
-    estimator = OfflineEstimator(oracle, node_values("fast", None, ORACLE_SOLVER))
+    estimator = OfflineEstimator(oracle, ORACLE_OPTIONS.node_values())
     records = []
     for gt_topic in (None, POSE_TOPIC):
-        bag = read_bag_views(demo_bag, IMAGE_TOPIC, gt_topic=gt_topic)
-        run = plan_evaluation(bag, IMAGE_TOPIC, samples=1, seed=3, view_counts=(2,))
-        run_evaluation(demo_bag, IMAGE_TOPIC, bag, run, estimator, center=(0, 0, 0), up=(0, 0, 1),
-                       show_progress=False)
+        run = evaluate_bag.evaluate_bag(demo_bag, estimator, GroundTruthOptions(IMAGE_TOPIC, gt_topic=gt_topic),
+                                        EvaluationProtocol(samples=1, seed=3, view_counts=(2,)), show_progress=False)
         records.append(run.records)
     from_tf, from_topic = records
     assert [(r["anchor_view"], r["view"]) for r in from_tf] == [(r["anchor_view"], r["view"]) for r in from_topic]
@@ -123,13 +126,11 @@ def test_tf_and_pose_topic_ground_truth_give_the_same_numbers(demo_bag, oracle):
         assert a["pos_err"] == pytest.approx(b["pos_err"], abs=1e-12)
 
 
-def test_report_files(tmp_path, demo_bag, oracle_run):
-    bag, run = oracle_run
-    args = parse_args([str(demo_bag), "--out", str(tmp_path / "out"), "--samples", "2",
-                       "--preset", "fast"] + [x for item in ORACLE_SOLVER for x in ("--solver-param", item)])
-    table = write_report(args.out, args, node_values("fast", None, ORACLE_SOLVER), {"predictor": "oracle"}, bag,
-                         run, seconds=1.5)
-    report = json.loads((args.out / "report.json").read_text())
+def test_report_files(tmp_path, oracle_run):
+    out = tmp_path / "out"
+    table = write_report(out, oracle_run)
+    report = json.loads((out / "report.json").read_text())
+    assert report["model"] == {"predictor": "oracle"} and report["mode"] == "offline"
     assert report["aggregates"]["all"]["rot_acc_15"] == 1.0 and len(report["pairs"]) == 32
     parameters = report["node_parameters"]
     assert parameters["refine_steps_per_view"] == 30 and parameters["variant"] == "full"
@@ -137,14 +138,14 @@ def test_report_files(tmp_path, demo_bag, oracle_run):
     assert report["views"] == {"total": VIEWS, "usable": VIEWS, "skipped": []}
     assert {"sample", "n", "anchor_view", "view", "pred_rel_sph", "true_rel_sph", "rot_err_deg", "pos_err",
             "score", "ambiguous", "seconds"} <= set(report["pairs"][0])
-    markdown = (args.out / "report.md").read_text()
+    markdown = (out / "report.md").read_text()
     assert table in markdown
     assert "| ID-Pose (full) | 8 | 100.0 | 100.0 | 100.0 |" in table
     assert "| ID-Pose (full) | all | 100.0 | 100.0 | 100.0 |" in table
     assert "| random poses | all |" in table and report["random_baseline"]["guesses_per_pair"] == 200
     assert report["random_baseline"]["aggregates"]["all"]["rot_acc_30"] < 0.2
     for sample in (0, 1):
-        image = cv2.imread(str(args.out / f"cameras_{sample}.png"))
+        image = cv2.imread(str(out / f"cameras_{sample}.png"))
         assert image is not None and image.shape[0] > 100
 
 
@@ -169,7 +170,7 @@ def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch)
     The model loader of both paths is swapped for the oracle fixture (no real model is fast here);
     publishing, ~/capture, ~/estimate, ~/poses and /diagnostics are the node's own.
     """
-    monkeypatch.setattr(evaluate_bag, "load_predictor", lambda *args, **kwargs: oracle)
+    monkeypatch.setattr(estimators, "load_predictor", lambda *args, **kwargs: oracle)
     monkeypatch.setattr(estimator_node, "load_predictor", lambda *args, **kwargs: oracle)
     common = [str(demo_bag), "--samples", "1", "--seed", "1", "--n", "2", "4", "--preset", "fast", "--device", "cpu",
               "--image-size", "128"]

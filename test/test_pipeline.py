@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
-from idpose_core.pipeline import estimate_view_poses, views_mosaic
+from idpose_core.pipeline import PipelineSettings, ViewInput, estimate_view_poses, views_mosaic
 from idpose_core.preprocessing import PreprocessingError
 from idpose_core.solver import Cancelled, SolverConfig
 from idpose_core.synthetic.render_oracle import RenderOracle
@@ -33,9 +33,10 @@ def scene():
     with SceneRenderer(spec, image_size=96) as renderer:
         renders = [renderer.render(*pose) for pose in sph]
     oracle = RenderOracle(spec, sph, step_deg=10.0, latent_size=16, render_size=48)
-    rgbs = [rgb for rgb, _ in renders]
-    alphas = [(mask * 255).astype(np.uint8) for _, mask in renders]
-    return sph, oracle, rgbs, alphas
+    views = [ViewInput(rgb, (mask * 255).astype(np.uint8)) for rgb, mask in renders]
+    settings = PipelineSettings(CONFIG.updated(anchor_polar_deg=float(np.degrees(sph[0, 0]))), OBJECT_DISTANCE,
+                                image_size=64)
+    return sph, oracle, views, settings
 
 
 def true_poses(sph: np.ndarray) -> np.ndarray:
@@ -52,11 +53,11 @@ def rotation_error_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_rendered_views_come_back_as_their_true_poses_in_the_anchor_frame(scene):
-    sph, oracle, rgbs, alphas = scene
+    sph, oracle, views, settings = scene
     reports = []
-    result = estimate_view_poses(oracle, rgbs, [alphas[0], None, alphas[2]], CONFIG, sph[0, 0], OBJECT_DISTANCE,
-                                 progress=lambda stage, done, total: reports.append((stage, done, total)),
-                                 image_size=64)
+    views = [views[0], ViewInput(views[1].rgb), views[2]]  # the middle one without alpha: its mask is computed
+    result = estimate_view_poses(oracle, views, settings,
+                                 progress=lambda stage, done, total: reports.append((stage, done, total)))
     assert result.poses.shape == (3, 4, 4)
     np.testing.assert_allclose(result.poses[0], np.eye(4), atol=1e-9)
     expected = true_poses(sph)
@@ -75,7 +76,7 @@ def test_rendered_views_come_back_as_their_true_poses_in_the_anchor_frame(scene)
 
 
 def test_a_cancel_during_the_run_raises_cancelled(scene):
-    sph, oracle, rgbs, alphas = scene
+    _, oracle, views, settings = scene
     cancel = threading.Event()
     calls = []
 
@@ -85,19 +86,17 @@ def test_a_cancel_during_the_run_raises_cancelled(scene):
             cancel.set()
 
     with pytest.raises(Cancelled):
-        estimate_view_poses(oracle, rgbs, alphas, CONFIG, sph[0, 0], OBJECT_DISTANCE, progress=progress, cancel=cancel)
+        estimate_view_poses(oracle, views, settings, progress=progress, cancel=cancel)
     assert len(calls) < 10, "stopped soon after the request"
 
 
 def test_bad_view_sets_are_refused_with_the_problem_named(scene):
-    sph, oracle, rgbs, alphas = scene
+    _, oracle, views, settings = scene
     with pytest.raises(ValueError, match="at least 2 views"):
-        estimate_view_poses(oracle, rgbs[:1], alphas[:1], CONFIG, sph[0, 0], OBJECT_DISTANCE)
-    with pytest.raises(ValueError, match="3 images and 2 alphas"):
-        estimate_view_poses(oracle, rgbs, alphas[:2], CONFIG, sph[0, 0], OBJECT_DISTANCE)
-    empty_alpha = np.zeros_like(alphas[1])
+        estimate_view_poses(oracle, views[:1], settings)
+    empty = ViewInput(views[1].rgb, np.zeros_like(views[1].alpha))
     with pytest.raises(PreprocessingError, match="view 1"):
-        estimate_view_poses(oracle, rgbs, [alphas[0], empty_alpha, alphas[2]], CONFIG, sph[0, 0], OBJECT_DISTANCE)
+        estimate_view_poses(oracle, [views[0], empty, views[2]], settings)
 
 
 def test_views_mosaic_puts_the_views_side_by_side_as_rgb8():

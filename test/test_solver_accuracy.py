@@ -60,7 +60,7 @@ def test_full_is_at_least_as_accurate_as_naive(count):
     specs = oracle_objects()[:10]
     accuracy = {}
     for variant in ("naive", "full"):
-        config = SolverConfig(**{**SETS.__dict__, "variant": variant})
+        config = SETS.updated(variant=variant)
         errors = np.concatenate([solve(spec, count, seed=200 + index, config=config)[0]
                                  for index, spec in enumerate(specs)])
         accuracy[variant] = float(np.mean(errors < 15.0))

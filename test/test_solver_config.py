@@ -1,6 +1,5 @@
 """SolverConfig: paper defaults, presets, range checks naming the field, polar candidates."""
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -38,7 +37,7 @@ def test_fast_preset_is_cheaper_and_accepts_overrides():
 )
 def test_out_of_range_fields_are_named(field, value):
     with pytest.raises(ValueError, match=field):
-        replace(SolverConfig(), **{field: value}).validate()
+        SolverConfig(**{field: value}).validate()
 
 
 def test_polar_candidates_default_given_and_from_the_anchor():
@@ -52,13 +51,30 @@ def test_polar_candidates_default_given_and_from_the_anchor():
     assert absolute.min() - 45.0 <= 0.0 and absolute.max() + 45.0 >= 180.0, "must cover the whole range"
 
 
-def test_recommended_settings_fill_only_fields_left_at_the_paper_defaults():
+def test_recommended_settings_fill_only_settings_the_caller_did_not_choose():
     recommended = {"probe_t": 0.85, "refine_t_range": (0.8, 0.9), "refine_lr": 0.5}
     config = SolverConfig.preset("fast", refine_lr=2.0).with_recommended(recommended)
     assert config.probe_t == 0.85 and config.refine_t_range == (0.8, 0.9)
     assert config.refine_lr == 2.0  # the caller's own choice wins
     assert config.refine_steps_per_view == SolverConfig.preset("fast").refine_steps_per_view
     assert SolverConfig().with_recommended({}) == SolverConfig()
+
+
+def test_a_chosen_value_equal_to_the_paper_default_still_wins():
+    recommended = {"probe_t": 0.4, "refine_t_range": (0.4, 0.41)}
+    assert SolverConfig(probe_t=0.2).with_recommended(recommended).probe_t == 0.2
+    assert SolverConfig.preset("default", probe_t=0.2).with_recommended(recommended).probe_t == 0.2
+    updated = SolverConfig().updated(refine_t_range=(0.2, 0.21))
+    assert updated.with_recommended(recommended).refine_t_range == (0.2, 0.21)
+    assert SolverConfig().with_recommended(recommended).probe_t == 0.4  # left alone: the model's value
+
+
+def test_chosen_settings_are_tracked_through_updates_and_unknown_names_refused():
+    config = SolverConfig(seed=3).updated(probe_batch=2)
+    assert config.chosen == {"seed", "probe_batch"} and (config.seed, config.probe_batch) == (3, 2)
+    assert SolverConfig.preset("fast").chosen == {"probe_batch", "keep_top", "refine_steps_per_view", "runner_up_steps"}
+    with pytest.raises(TypeError, match="no settings \\['probe_time'\\]"):
+        SolverConfig(probe_time=0.5)
 
 
 def test_recommended_settings_are_checked():

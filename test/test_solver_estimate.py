@@ -6,7 +6,6 @@ and 10 runner-up steps per view (paper: 8 x 5, 10, 600); the oracle's learning r
 """
 import math
 import threading
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -27,6 +26,7 @@ class CountingPredictor:
     def __init__(self, oracle: RenderOracle):
         self.oracle = oracle
         self.num_train_timesteps = oracle.num_train_timesteps
+        self.solver_defaults = oracle.solver_defaults
         self.encode_calls = 0
         self.calls: list[tuple[int, bool]] = []
         self.back_propagated = 0  # differentiated calls whose errors have received their gradient
@@ -100,8 +100,8 @@ def test_gradient_steps_back_propagate_chunk_by_chunk():
 
 
 def test_chunked_gradients_give_the_same_poses():
-    whole = estimate_poses(scene(4), images(4), replace(CONFIG, grad_batch=64))
-    chunked = estimate_poses(scene(4), images(4), replace(CONFIG, grad_batch=5))
+    whole = estimate_poses(scene(4), images(4), CONFIG.updated(grad_batch=64))
+    chunked = estimate_poses(scene(4), images(4), CONFIG.updated(grad_batch=5))
     assert np.allclose(whole.rel_poses, chunked.rel_poses, atol=1e-5)
     assert whole.backward_samples == chunked.backward_samples
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -13,9 +13,13 @@ DEFAULT_POLAR_CANDIDATES_DEG = (-120.0, -60.0, 0.0, 60.0, 120.0)
 ANCHOR_POLAR_STEP_DEG = 45.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class SolverConfig:
     """Solver settings; defaults are the official implementation's (Zero-1-to-3 XL, one GPU).
+
+    Built from keyword arguments only; ``chosen`` remembers which settings the caller gave (a
+    preset's included), so that a model's recommendations (``with_recommended``) never replace
+    them, even where a chosen value equals the paper's default. Derive variants with ``updated``.
 
     ``variant``: "naive" (pairs independent), "tr" (triangular refinement), "full" (triangular
     exploration and refinement). Timesteps are fractions of the predictor's training steps.
@@ -48,9 +52,27 @@ class SolverConfig:
     ambiguity_deg: float = 30.0
     ambiguity_margin: float = 0.1
 
+    def __init__(self, **settings: Any) -> None:
+        defaults = {f.name: f.default for f in fields(self)}
+        unknown = sorted(set(settings) - set(defaults))
+        if unknown:
+            raise TypeError(f"SolverConfig has no settings {unknown}; it has {sorted(defaults)}")
+        for name, default in defaults.items():
+            object.__setattr__(self, name, settings.get(name, default))
+        object.__setattr__(self, "_chosen", frozenset(settings))
+
+    @property
+    def chosen(self) -> frozenset[str]:
+        """The settings given by the caller rather than left at their defaults."""
+        return self._chosen
+
+    def updated(self, **changes: Any) -> SolverConfig:
+        """A copy with ``changes`` applied; they join the chosen settings."""
+        return SolverConfig(**{name: getattr(self, name) for name in self.chosen}, **changes)
+
     @classmethod
     def preset(cls, name: str, **overrides) -> SolverConfig:
-        """Named settings: "default" (the paper's) or "fast", then overrides.
+        """Named settings: "default" (the paper's) or "fast", then overrides; all of them count as chosen.
 
         "fast" keeps the paper's exploration grid and its 10 adjust steps (5 lost a pose on the render
         oracle), probes with 4 noises instead of 16, keeps 3 candidates, and refines 100 steps per view
@@ -62,19 +84,17 @@ class SolverConfig:
         }
         if name not in presets:
             raise ValueError(f"unknown solver preset {name!r}; choose one of {sorted(presets)}")
-        config = replace(cls(), **{**presets[name], **overrides})
+        config = cls(**{**presets[name], **overrides})
         config.validate()
         return config
 
     def with_recommended(self, recommended: Mapping[str, Any]) -> SolverConfig:
         """These settings with a predictor's recommendations (its ``solver_defaults``, e.g. the noise
-        levels a small model was trained at) in every field still at the paper's default value."""
+        levels a small model was trained at) in every setting the caller did not choose."""
         unknown = sorted(set(recommended) - {f.name for f in fields(self)})
         if unknown:
             raise ValueError(f"recommended solver settings name unknown SolverConfig fields {unknown}")
-        paper = SolverConfig()
-        changed = {name: value for name, value in recommended.items() if getattr(self, name) == getattr(paper, name)}
-        config = replace(self, **changed)
+        config = self.updated(**{name: value for name, value in recommended.items() if name not in self.chosen})
         config.validate()
         return config
 

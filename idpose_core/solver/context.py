@@ -11,6 +11,7 @@ from idpose_core.solver.config import SolverConfig
 from idpose_core.solver.errors import Cancelled
 from idpose_core.spherical import invert
 
+# progress(stage, done, total): samples of the current stage evaluated so far, and its total.
 Progress = Callable[[str, int, int], None]
 
 

@@ -10,7 +10,10 @@ it real local minima, so it exercises exploration, selection and refinement of t
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from functools import lru_cache
+from types import MappingProxyType
+from typing import Any
 
 import cv2
 import numpy as np
@@ -64,6 +67,7 @@ class RenderOracle:
     """
 
     num_train_timesteps = NUM_TRAIN_TIMESTEPS
+    solver_defaults: Mapping[str, Any] = MappingProxyType({})  # tests choose (ORACLE_SOLVER_SETTINGS)
 
     def __init__(self, spec: ObjectSpec, views_sph: np.ndarray, step_deg: float = 5.0,
                  latent_size: int = 32, render_size: int = 64):

@@ -80,6 +80,7 @@ class Zero123Predictor:
         if gradient_checkpointing:
             modules.unet.enable_gradient_checkpointing()
         self.num_train_timesteps = int(modules.scheduler.config.num_train_timesteps)
+        self.solver_defaults: dict = {}  # the paper's settings are Zero-1-to-3's
         self._clip_mean = torch.tensor(modules.clip_mean, device=self.device).view(1, 3, 1, 1)
         self._clip_std = torch.tensor(modules.clip_std, device=self.device).view(1, 3, 1, 1)
 
