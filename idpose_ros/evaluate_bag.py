@@ -146,16 +146,18 @@ def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str,
     return [{"n": n, "rot_err_deg": r, "pos_err": p} for r, p in zip(rot.ravel(), pos.ravel())]
 
 
-def usable_views(bag: Path, ground_truth: GroundTruthOptions) -> BagViews:
-    """The bag's views with their ground truth; BagError for an unreadable bag, a missing topic or fewer
-    than 2 usable views (before any model is loaded, when called first)."""
+def read_views(bag: Path, ground_truth: GroundTruthOptions) -> BagViews:
+    """The bag's views with their ground truth; BagError for an unreadable bag or a missing topic."""
     gt = ground_truth
-    views = read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance)
+    return read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance)
+
+
+def require_usable(views: BagViews, image_topic: str) -> None:
+    """BagError when fewer than 2 views have an image and ground truth."""
     if len(views.pool) < 2:
         reasons = "; ".join(f"view {k}: {r}" for k, r in list(views.skipped.items())[:3])
-        raise BagError(f"fewer than 2 usable views ({len(views.pool)} of {len(views.views)} on {gt.image_topic})"
+        raise BagError(f"fewer than 2 usable views ({len(views.pool)} of {len(views.views)} on {image_topic})"
                        + (f"; skipped {reasons}" if reasons else ""))
-    return views
 
 
 def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTruthOptions = GroundTruthOptions(),
@@ -163,12 +165,13 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
                  show_progress: bool = True) -> BagEvaluation:
     """Estimate the first n views of each seeded pick of the bag's posed views and score every pair.
 
-    ``views`` are ``usable_views(bag, ground_truth)`` when already read. Raises ``BagError`` as
-    ``usable_views`` does, and whatever the estimator raises.
+    ``views`` are ``read_views(bag, ground_truth)`` when already read. Raises ``BagError`` for an
+    unreadable bag, a missing topic or fewer than 2 usable views, and whatever the estimator raises.
     """
     started = time.perf_counter()
     gt = ground_truth
-    views = views or usable_views(bag, gt)
+    views = views or read_views(bag, gt)
+    require_usable(views, gt.image_topic)
     run = BagEvaluation(bag=Path(bag), ground_truth=gt, protocol=protocol,
                         estimator={**estimator.description, "node_parameters": estimator.values}, views=views,
                         picks=draw_picks(views.pool, protocol.samples, protocol.seed),
@@ -238,17 +241,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
-def report_notes(evaluation: BagEvaluation, requested: Sequence[int]) -> list[str]:
-    """What the user should know before reading the table: skipped views, view counts not evaluated."""
-    views, notes = evaluation.views, []
-    if views.skipped:
-        view, reason = next(iter(views.skipped.items()))
-        notes.append(f"{len(views.skipped)} of {len(views.views)} views skipped (reasons in report.json), "
-                     f"e.g. view {view}: {reason}")
-    if evaluation.view_counts != sorted(set(requested)):
-        notes.append(f"{len(views.pool)} usable views: evaluated sets of "
-                     f"{', '.join(map(str, evaluation.view_counts))} views only")
-    return notes
+def skipped_note(views: BagViews) -> str | None:
+    """One line on the views that cannot be evaluated, or None."""
+    if not views.skipped:
+        return None
+    view, reason = next(iter(views.skipped.items()))
+    return (f"{len(views.skipped)} of {len(views.views)} views skipped (reasons in report.json), "
+            f"e.g. view {view}: {reason}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -258,8 +257,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         options, ground_truth = estimator_options(args), ground_truth_options(args)
         options.node_values()  # bad solver options, then a bad bag, fail before a model is loaded
-        views = usable_views(args.bag, ground_truth)
-        usable_view_counts(protocol.view_counts, len(views.pool))
+        views = read_views(args.bag, ground_truth)
+        if skipped_note(views):
+            print(f"evaluate_bag: {skipped_note(views)}", file=sys.stderr)
+        require_usable(views, args.image_topic)
+        counts = usable_view_counts(protocol.view_counts, len(views.pool))
+        if counts != sorted(set(args.n)):
+            print(f"evaluate_bag: {len(views.pool)} usable views: evaluating sets of {', '.join(map(str, counts))} "
+                  "views only", file=sys.stderr)
         estimator = make_estimator(options)
         evaluation = evaluate_bag(args.bag, estimator, ground_truth, protocol, views)
     except (BagError, ModelLoadError, ReplayError, ValueError) as err:
@@ -268,8 +273,6 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if estimator is not None:
             estimator.close()
-    for note in report_notes(evaluation, args.n):
-        print(f"evaluate_bag: {note}", file=sys.stderr)
     table = write_report(args.out, evaluation)
     print(table)
     print(f"report: {args.out / 'report.md'}, {args.out / 'report.json'}")

@@ -14,15 +14,15 @@ def values(status: EstimatorStatus) -> tuple[DiagnosticStatus, dict[str, str]]:
 
 
 def test_an_estimate_in_progress_reports_stage_and_percent():
-    entry, kv = values(EstimatorStatus(state="estimating", views_buffered=3, max_views=8, model="loaded",
+    entry, kv = values(EstimatorStatus(state="estimating", run_id=4, views_buffered=3, max_views=8, model="loaded",
                                        stage="refine", progress_percent=42.25))
     assert entry.level == DiagnosticStatus.OK and entry.message == "estimating: refine 42 %"
-    assert (kv["state"], kv["stage"], kv["progress_percent"], kv["views_buffered"], kv["max_views"]) == (
-        "estimating", "refine", "42.2", "3", "8")
+    assert (kv["state"], kv["run_id"], kv["stage"], kv["progress_percent"], kv["views_buffered"],
+            kv["max_views"]) == ("estimating", "4", "refine", "42.2", "3", "8")
 
 
 def test_a_finished_run_reports_time_and_per_view_scores():
-    entry, kv = values(EstimatorStatus(state="idle", views_buffered=3, max_views=8, model="loaded",
+    entry, kv = values(EstimatorStatus(state="idle", run_id=2, views_buffered=3, max_views=8, model="loaded",
                                        last_run_seconds=12.3456, scores=(0.5, 0.25), ambiguous=(False, True)))
     assert entry.level == DiagnosticStatus.OK and entry.message == "idle, 3 views buffered"
     assert kv["last_run_seconds"] == "12.346"
@@ -32,11 +32,11 @@ def test_a_finished_run_reports_time_and_per_view_scores():
 
 
 def test_failures_are_errors():
-    failed, kv = values(EstimatorStatus(state="failed", views_buffered=2, max_views=8, model="loaded",
+    failed, kv = values(EstimatorStatus(state="failed", run_id=1, views_buffered=2, max_views=8, model="loaded",
                                         last_error="PreprocessingError: view 1 has no object"))
     assert failed.level == DiagnosticStatus.ERROR and "view 1 has no object" in failed.message
     assert kv["last_error"] == "PreprocessingError: view 1 has no object"
-    no_model, kv = values(EstimatorStatus(state="failed", views_buffered=0, max_views=8,
+    no_model, kv = values(EstimatorStatus(state="failed", run_id=0, views_buffered=0, max_views=8,
                                           model="unavailable: no model available: /x does not exist",
                                           last_error="no model available: /x does not exist"))
     assert no_model.level == DiagnosticStatus.ERROR and kv["model"].startswith("unavailable: ")

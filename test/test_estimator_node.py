@@ -163,7 +163,8 @@ def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harnes
     assert h.node.status().views_buffered == 4
     wait_for(lambda: h.logged("dropped a malformed message"), "the malformed-message warning on /rosout")
 
-    assert h.call("estimate").success
+    started = h.call("estimate")
+    assert started.success and started.message == "estimating the poses of 4 views (run 1)"
     (poses,) = wait_for(lambda: h.poses, "the PoseArray")
     assert poses.header.frame_id == "anchor_cam"
     assert (poses.header.stamp.sec, poses.header.stamp.nanosec) == (42, 7)
@@ -190,7 +191,8 @@ def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harnes
         ours = [s for array in h.diagnostics for s in array.status if s.name.startswith("idpose_estimator")]
         return {kv.key: kv.value for kv in ours[-1].values} if ours else {}
     report = wait_for(lambda: (d := last_diagnostics()) and "view_3_score" in d and d, "diagnostics with scores")
-    assert (report["state"], report["views_buffered"], report["model"]) == ("idle", "4", "loaded")
+    assert (report["state"], report["run_id"], report["views_buffered"], report["model"]) == (
+        "idle", "1", "4", "loaded")
     assert float(report["last_run_seconds"]) > 0 and "view_4_score" not in report
     assert h.state() == "idle" and h.node.status().views_buffered == 4, "a finished estimate keeps the views"
 
@@ -210,7 +212,9 @@ def test_cancel_and_reset_during_a_run(harness, object_views, wait_for):
     wait_for(lambda: h.state() == "idle", "the cancelled run to stop", timeout=10.0)
     assert h.node.status().last_error == "cancelled" and h.node.status().views_buffered == 2
 
-    assert h.call("estimate").success, "a cancelled estimate leaves the buffer for a retry"
+    retry = h.call("estimate")
+    assert retry.success and retry.message.endswith("(run 2)"), "a cancelled estimate leaves the buffer for a retry"
+    assert h.node.status().run_id == 2
     wait_for(lambda: h.node.status().stage == "refinement", "the refinement stage")
     reset = h.call("reset")
     assert reset.success and reset.message == "dropped 2 views (cancelled the running estimate)"
