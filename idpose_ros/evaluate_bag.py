@@ -28,7 +28,6 @@ from idpose_core.cameras import c2w_to_spherical
 from idpose_core.evaluation import (
     PICK_SIZE,
     VIEW_COUNTS,
-    ViewSetEstimate,
     draw_picks,
     object_frame_c2w,
     predicted_c2w,
@@ -36,12 +35,14 @@ from idpose_core.evaluation import (
     score_pairs,
 )
 from idpose_core.metrics import aggregate, random_pose_errors
+from idpose_core.solver import Progress
 from idpose_core.zero123 import ModelLoadError
 from idpose_ros.bag_io import BagError
 from idpose_ros.bag_report import write_report
 from idpose_ros.bag_views import BagViews, load_view_messages, read_bag_views
 from idpose_ros.estimators import (
     NODE_BOUNDS,
+    ImageMessage,
     ViewSetEstimator,
     add_estimator_arguments,
     estimator_options,
@@ -108,6 +109,14 @@ class BagEvaluation:
         """The same metrics for random guesses of the target cameras (``pairs`` counts guesses)."""
         return aggregate(self.random_records)
 
+    def add(self, task: EstimateTask, outcome: EstimateOutcome) -> None:
+        """Take in one estimate's outcome (the cameras plotted per sample are its largest n's)."""
+        self.records.extend(outcome.records)
+        self.random_records.extend(outcome.random_records)
+        self.estimates.append(outcome.row)
+        self.true_cameras[task.sample] = task.true_c2w
+        self.predicted_cameras[task.sample] = outcome.predicted_c2w
+
 
 def usable_view_counts(requested: Sequence[int], pool_size: int) -> list[int]:
     """The requested view counts a pick from this pool can hold; BagError when none can."""
@@ -125,17 +134,60 @@ def anchor_geometry(true_c2w: np.ndarray) -> tuple[float, float]:
     return float(np.clip(math.degrees(polar), low, high)), float(distance)
 
 
-def score_estimate(estimate: ViewSetEstimate, pick: Sequence[int], true_c2w: np.ndarray, sample: int
-                   ) -> list[dict[str, Any]]:
-    """One record per (anchor, view) pair of an estimate of the first n views of ``pick``: predicted and true
-    relative poses, the paper's errors, the solver's score and ambiguity flag, the estimate's seconds."""
-    n = len(estimate.poses)
+@dataclass(frozen=True)
+class EstimateTask:
+    """One estimate of the protocol: the first ``n`` views of pick ``sample`` (``pick``: view ids, anchor first),
+    with the true cameras of the whole pick (``true_c2w`` (k, 4, 4), OpenGL, object frame); ``index`` is its
+    place in the run, which with ``seed`` seeds its random baseline."""
+
+    sample: int
+    index: int
+    pick: tuple[int, ...]
+    n: int
+    true_c2w: np.ndarray
+    seed: int
+
+
+@dataclass(frozen=True)
+class EstimateOutcome:
+    """What one estimate adds to the evaluation: pair records, random-baseline records, the estimate's row
+    and the predicted cameras (n, 4, 4), the anchor's true one first."""
+
+    records: list[dict[str, Any]]
+    random_records: list[dict[str, Any]]
+    row: dict[str, Any]
+    predicted_c2w: np.ndarray
+
+
+def plan_tasks(views: BagViews, ground_truth: GroundTruthOptions, protocol: EvaluationProtocol
+               ) -> list[EstimateTask]:
+    """The protocol's estimates on these views, in order: each seeded pick with each usable view count."""
+    picks = draw_picks(views.pool, protocol.samples, protocol.seed)
+    counts = usable_view_counts(protocol.view_counts, len(views.pool))
+    tasks: list[EstimateTask] = []
+    for sample, pick in enumerate(picks):
+        true_c2w = object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), ground_truth.object_center,
+                                    ground_truth.up)
+        tasks += [EstimateTask(sample, len(tasks) + k, tuple(pick), n, true_c2w, protocol.seed)
+                  for k, n in enumerate(counts)]
+    return tasks
+
+
+def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, messages: Sequence[ImageMessage],
+                 progress: Progress | None = None) -> EstimateOutcome:
+    """Estimate the task's views (``messages``: its first n images, anchor first) and score them."""
+    true_c2w = task.true_c2w[:task.n]
     anchor_polar_deg, distance = anchor_geometry(true_c2w)
+    estimate = estimator(messages, anchor_polar_deg, distance, progress)
     rel = relative_from_anchor_frame(estimate.poses, math.radians(anchor_polar_deg), distance)
-    return [{"sample": sample, "n": n, "anchor_view": pick[0], "view": target, **record, "score": float(score),
-             "ambiguous": bool(ambiguous), "seconds": estimate.seconds}
-            for target, record, score, ambiguous in zip(pick[1:n], score_pairs(rel, true_c2w[:n]), estimate.scores,
-                                                        estimate.ambiguous)]
+    records = [{"sample": task.sample, "n": task.n, "anchor_view": task.pick[0], "view": target, **record,
+                "score": float(score), "ambiguous": bool(ambiguous), "seconds": estimate.seconds}
+               for target, record, score, ambiguous in zip(task.pick[1:task.n], score_pairs(rel, true_c2w),
+                                                           estimate.scores, estimate.ambiguous)]
+    row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "seconds": estimate.seconds,
+           "anchor_polar_deg": anchor_polar_deg, "object_distance": distance}
+    predicted = np.concatenate([true_c2w[:1], predicted_c2w(true_c2w[0], [r["pred_rel_sph"] for r in records])])
+    return EstimateOutcome(records, random_baseline(true_c2w, (task.seed, task.index, task.n)), row, predicted)
 
 
 def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str, Any]]:
@@ -172,33 +224,24 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
     gt = ground_truth
     views = views or read_views(bag, gt)
     require_usable(views, gt.image_topic)
+    tasks = plan_tasks(views, gt, protocol)
     run = BagEvaluation(bag=Path(bag), ground_truth=gt, protocol=protocol,
                         estimator={**estimator.description, "node_parameters": estimator.values}, views=views,
-                        picks=draw_picks(views.pool, protocol.samples, protocol.seed),
-                        view_counts=usable_view_counts(protocol.view_counts, len(views.pool)))
-    messages = load_view_messages(bag, gt.image_topic, {v for pick in run.picks for v in pick})
-    with tqdm(total=len(run.picks) * len(run.view_counts), desc="estimating", unit="set", file=sys.stderr,
-              disable=not show_progress) as bar:
-        for sample, pick in enumerate(run.picks):
-            true_c2w = object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), gt.object_center, gt.up)
-            anchor_polar_deg, distance = anchor_geometry(true_c2w)
-            run.true_cameras[sample] = true_c2w
-            for n in run.view_counts:
-                def progress(stage: str, done: int, total: int, label: str = f"sample {sample}, {n} views") -> None:
-                    text = f"{label}: {stage} {100 * done // max(total, 1)} %"
-                    if text != bar.postfix:
-                        bar.set_postfix_str(text)
+                        picks=list({task.sample: list(task.pick) for task in tasks}.values()),
+                        view_counts=sorted({task.n for task in tasks}))
+    messages = load_view_messages(bag, gt.image_topic, {v for task in tasks for v in task.pick})
+    with tqdm(total=len(tasks), desc="estimating", unit="set", file=sys.stderr, disable=not show_progress) as bar:
+        for task in tasks:
+            label = f"sample {task.sample}, {task.n} views"
 
-                bar.set_postfix_str(f"sample {sample}, {n} views")
-                estimate = estimator([messages[v] for v in pick[:n]], anchor_polar_deg, distance, progress)
-                records = score_estimate(estimate, pick, true_c2w, sample)
-                run.records.extend(records)
-                run.random_records.extend(random_baseline(true_c2w[:n], (protocol.seed, len(run.estimates), n)))
-                run.estimates.append({"sample": sample, "n": n, "views": pick[:n], "seconds": estimate.seconds,
-                                      "anchor_polar_deg": anchor_polar_deg, "object_distance": distance})
-                run.predicted_cameras[sample] = np.concatenate(
-                    [true_c2w[:1], predicted_c2w(true_c2w[0], [r["pred_rel_sph"] for r in records])])
-                bar.update()
+            def progress(stage: str, done: int, total: int, label: str = label) -> None:
+                text = f"{label}: {stage} {100 * done // max(total, 1)} %"
+                if text != bar.postfix:
+                    bar.set_postfix_str(text)
+
+            bar.set_postfix_str(label)
+            run.add(task, run_estimate(estimator, task, [messages[v] for v in task.pick[:task.n]], progress))
+            bar.update()
     run.seconds = time.perf_counter() - started
     return run
 
