@@ -8,18 +8,24 @@ released ``105000.ckpt`` / ``zero123-xl.ckpt`` use (``model.diffusion_model.inpu
 Reduced: Zero123Config.tiny instead of the full-size architecture.
 """
 import re
+from types import SimpleNamespace
 
 import pytest
 import torch
+from diffusers import AutoencoderKL, UNet2DConditionModel
+from transformers import CLIPVisionConfig, CLIPVisionModelWithProjection
 
 from idpose_core.model_loading import load_predictor
-from idpose_core.zero123 import Zero123Config, Zero123Predictor
+from idpose_core.zero123 import ModelLoadError, Zero123Config, Zero123Predictor
+from idpose_core.zero123.ldm_architecture import config_from_ldm_state
 
 RESNET_LDM = {"norm1": "in_layers.0", "conv1": "in_layers.2", "time_emb_proj": "emb_layers.1",
               "norm2": "out_layers.0", "conv2": "out_layers.3", "conv_shortcut": "skip_connection"}
 VAE_ATTENTION_LDM = {"group_norm": "norm", "to_q": "q", "to_k": "k", "to_v": "v", "to_out.0": "proj_out"}
 CLIP_LAYER_LDM = {"layer_norm1": "ln_1", "layer_norm2": "ln_2", "mlp.fc1": "mlp.c_fc", "mlp.fc2": "mlp.c_proj",
                   "self_attn.out_proj": "attn.out_proj"}
+# The tiny CLIP tower widened to one OpenAI head (width 64): what a file without a config must hold.
+OPENAI_CLIP_WIDTH = {"hidden_size": 64, "num_attention_heads": 1}
 
 
 
@@ -113,8 +119,9 @@ def clip_to_openai(state):
     return out
 
 
-def ldm_state_dict(predictor):
-    modules, config = predictor.modules, Zero123Config.tiny()
+def ldm_state_dict(modules, config=None):
+    """The parts of ``modules`` (built from ``config``, default the tiny one) under the original release's names."""
+    config = config or Zero123Config.tiny()
     state = {}
     state.update(unet_to_ldm(modules.unet.state_dict(), config.unet["layers_per_block"]))
     state.update(vae_to_ldm(modules.vae.state_dict(), len(config.vae["block_out_channels"])))
@@ -134,7 +141,7 @@ def source():
 @pytest.fixture(scope="module")
 def checkpoint(source, tmp_path_factory):
     file = tmp_path_factory.mktemp("ldm") / "zero123-tiny.ckpt"
-    torch.save({"state_dict": ldm_state_dict(source), "global_step": 105000, "epoch": 3}, file)
+    torch.save({"state_dict": ldm_state_dict(source.modules), "global_step": 105000, "epoch": 3}, file)
     return file
 
 
@@ -166,14 +173,14 @@ def test_bare_state_dict_in_safetensors(source, tmp_path, errors_of):
     from safetensors.torch import save_file
 
     file = tmp_path / "zero123-tiny.safetensors"
-    save_file({k: v.contiguous() for k, v in ldm_state_dict(source).items()}, file)
+    save_file({k: v.contiguous() for k, v in ldm_state_dict(source.modules).items()}, file)
     loaded = Zero123Predictor.from_ldm_checkpoint(file, config=Zero123Config.tiny())
     torch.testing.assert_close(errors_of(loaded), errors_of(source), rtol=0, atol=0)
 
 
 def test_ema_weights_on_request(source, tmp_path):
     """LDM keeps an EMA UNet under flattened names (model_ema.diffusion_modelinput_blocks00weight)."""
-    state = ldm_state_dict(source)
+    state = ldm_state_dict(source.modules)
     ema = {"model_ema." + k[len("model."):].replace(".", ""): v + 1.0 for k, v in state.items()
            if k.startswith("model.diffusion_model.")}
     file = tmp_path / "with-ema.ckpt"
@@ -185,15 +192,55 @@ def test_ema_weights_on_request(source, tmp_path):
     torch.testing.assert_close(averaged.modules.unet.conv_in.weight, conv_in + 1.0, rtol=0, atol=0)
 
 
-def test_full_size_config_is_the_default_and_refuses_a_tiny_file(checkpoint):
-    """load_predictor assumes the released architecture; a tiny file is reported as mis-shaped."""
-    with pytest.raises(ValueError, match="do not match the Zero-1-to-3 shapes") as caught:
+def test_released_shapes_read_as_the_full_size_architecture():
+    """A released file (here its shapes alone, on the meta device) loads into exactly Zero123Config.full()."""
+    config = Zero123Config.full()
+    with torch.device("meta"):
+        parts = SimpleNamespace(unet=UNet2DConditionModel(**config.unet), vae=AutoencoderKL(**config.vae),
+                                image_encoder=CLIPVisionModelWithProjection(CLIPVisionConfig(**config.image_encoder)),
+                                cc_projection=torch.nn.Linear(config.projection_in, config.projection_out))
+    assert config_from_ldm_state(ldm_state_dict(parts, config)) == config
+
+
+def save_ldm(config, file, seed=5):
+    """A random model of ``config`` saved under the original names; returns the model."""
+    model = Zero123Predictor.random(config, seed)
+    torch.save({"state_dict": ldm_state_dict(model.modules, config)}, file)
+    return model
+
+
+def test_load_predictor_reads_a_reduced_architecture(tmp_path, errors_of):
+    """Without a config, the widths come from the file: a narrow file loads by its path alone."""
+    config = Zero123Config.tiny().updated(image_encoder=OPENAI_CLIP_WIDTH)
+    source = save_ldm(config, tmp_path / "narrow.ckpt")
+    loaded = load_predictor(str(tmp_path / "narrow.ckpt"), device="cpu")
+    assert_same_weights(loaded, source)
+    torch.testing.assert_close(errors_of(loaded), errors_of(source), rtol=0, atol=0)
+
+
+def test_an_explicit_config_the_file_does_not_fit_is_named(checkpoint):
+    with pytest.raises(ModelLoadError, match="do not match the Zero-1-to-3 shapes") as caught:
+        Zero123Predictor.from_ldm_checkpoint(checkpoint, device="cpu", config=Zero123Config.full())
+    assert str(checkpoint) in str(caught.value)
+
+
+def test_a_clip_tower_without_a_whole_head_needs_a_config(checkpoint):
+    """Heads are in no tensor: OpenAI's rule (width // 64) gives none for the tiny 32-wide tower."""
+    with pytest.raises(ModelLoadError, match="needs an explicit Zero123Config") as caught:
         load_predictor(str(checkpoint), device="cpu")
     assert str(checkpoint) in str(caught.value)
 
 
+def test_parts_that_do_not_fit_are_refused(tmp_path):
+    """A UNet without the reference-latent channels (4 in, as Stable Diffusion's) is no Zero-1-to-3."""
+    config = Zero123Config.tiny().updated(image_encoder=OPENAI_CLIP_WIDTH, unet={"in_channels": 4})
+    save_ldm(config, tmp_path / "sd.ckpt")
+    with pytest.raises(ModelLoadError, match="parts do not fit together: unet in_channels 4"):
+        load_predictor(str(tmp_path / "sd.ckpt"), device="cpu")
+
+
 def test_missing_parts_are_named(source, tmp_path):
-    state = {k: v for k, v in ldm_state_dict(source).items() if not k.startswith("cond_stage_model.")}
+    state = {k: v for k, v in ldm_state_dict(source.modules).items() if not k.startswith("cond_stage_model.")}
     file = tmp_path / "no-clip.ckpt"
     torch.save({"state_dict": state}, file)
     with pytest.raises(ValueError, match="no cond_stage_model.model.visual weights"):

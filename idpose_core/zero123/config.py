@@ -6,7 +6,7 @@ same code builds a random model (tests, benchmarks) or the skeleton that release
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -58,6 +58,10 @@ class Zero123Config:
     @property
     def projection_out(self) -> int:
         return int(self.unet["cross_attention_dim"])
+
+    def updated(self, **parts: Mapping[str, Any]) -> Zero123Config:
+        """A copy with some kwargs of some parts changed, e.g. ``updated(unet={"layers_per_block": 1})``."""
+        return replace(self, **{name: _frozen({**getattr(self, name), **values}) for name, values in parts.items()})
 
     @classmethod
     def full(cls) -> Zero123Config:

@@ -3,7 +3,8 @@
 Its ``state_dict`` uses the latent-diffusion names: ``model.diffusion_model.*`` (UNet),
 ``first_stage_model.*`` (VAE), ``cond_stage_model.model.visual.*`` (OpenAI CLIP ViT-L/14) and
 ``cc_projection.*``. UNet and VAE are renamed by diffusers' single-file helpers; the CLIP vision
-tower is renamed here (OpenAI -> transformers names). Files are read with ``weights_only=True``.
+tower is renamed here (OpenAI -> transformers names). The architecture comes from the tensor shapes
+(``ldm_architecture``) unless a ``Zero123Config`` is given. Files are read with ``weights_only=True``.
 """
 from __future__ import annotations
 
@@ -21,11 +22,9 @@ from transformers import CLIPVisionConfig, CLIPVisionModelWithProjection
 
 from idpose_core.zero123.config import Zero123Config
 from idpose_core.zero123.errors import ModelLoadError
-from idpose_core.zero123.modules import Zero123Modules
+from idpose_core.zero123.ldm_architecture import CLIP_PREFIX, UNET_PREFIX, VAE_PREFIX, config_from_ldm_state
+from idpose_core.zero123.modules import Zero123Modules, require_fit
 
-UNET_PREFIX = "model.diffusion_model."
-VAE_PREFIX = "first_stage_model."
-CLIP_PREFIX = "cond_stage_model.model.visual."
 PROJECTION_PREFIX = "cc_projection."
 
 _RESBLOCK = re.compile(r"^transformer\.resblocks\.(\d+)\.(.+)$")
@@ -44,17 +43,21 @@ _VISUAL_RENAMES = {
 
 
 def load_ldm_checkpoint(path: str | Path, config: Zero123Config | None = None, use_ema: bool = False) -> Zero123Modules:
-    """Read a Zero-1-to-3 LDM checkpoint into the parts of ``config`` (default: the released full size).
+    """Read a Zero-1-to-3 LDM checkpoint into the parts of ``config`` (default: read from its tensor shapes).
 
     ``use_ema`` takes the UNet's ``model_ema.*`` copy when the file has one (diffusers' converter).
     """
     file = Path(path).expanduser()
     state = read_state_dict(file)
-    config = config or Zero123Config.full()
     missing = [prefix.rstrip(".") for prefix in (UNET_PREFIX, VAE_PREFIX, CLIP_PREFIX, PROJECTION_PREFIX)
                if not any(key.startswith(prefix) for key in state)]
     if missing:
         raise ModelLoadError(file, f"not a Zero-1-to-3 checkpoint: no {', '.join(missing)} weights")
+    if config is None:
+        try:
+            config = config_from_ldm_state(state)
+        except ValueError as error:
+            raise ModelLoadError(file, f"cannot read the Zero-1-to-3 architecture from its tensors: {error}") from error
     parts = {
         "unet": convert_ldm_unet_checkpoint(state, dict(config.unet), extract_ema=use_ema),
         "vae": convert_ldm_vae_checkpoint(state, dict(config.vae)),
@@ -71,8 +74,9 @@ def load_ldm_checkpoint(path: str | Path, config: Zero123Config | None = None, u
             lines = " ".join(str(error).split())
             raise ModelLoadError(file, f"{name} weights do not match the Zero-1-to-3 shapes: {lines[:400]}") from error
         loaded[name] = module
-    return Zero123Modules(**loaded, scheduler=DDIMScheduler(**config.scheduler),
-                          clip_size=int(config.image_encoder["image_size"]))
+    modules = Zero123Modules(**loaded, scheduler=DDIMScheduler(**config.scheduler),
+                             clip_size=int(config.image_encoder["image_size"]))
+    return require_fit(modules, file)
 
 
 def read_state_dict(file: Path) -> dict[str, torch.Tensor]:

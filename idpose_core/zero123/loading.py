@@ -18,7 +18,7 @@ from transformers import CLIPVisionModelWithProjection
 
 from idpose_core.zero123.config import CLIP_MEAN, CLIP_STD, SCHEDULER
 from idpose_core.zero123.errors import ModelLoadError
-from idpose_core.zero123.modules import Zero123Modules, inconsistencies
+from idpose_core.zero123.modules import Zero123Modules, require_fit
 
 # Projection folder name -> name of its Linear inside the saved module (both conversions exist).
 PROJECTION_FOLDERS = {"cc_projection": "projection", "clip_camera_projection": "proj"}
@@ -47,10 +47,7 @@ def load_diffusers_folder(path: str | Path) -> Zero123Modules:
         clip_mean=mean,
         clip_std=std,
     )
-    problems = inconsistencies(modules)
-    if problems:
-        raise ModelLoadError(root, "parts do not fit together: " + "; ".join(problems))
-    return modules
+    return require_fit(modules, root)
 
 
 def save_diffusers_folder(modules: Zero123Modules, path: str | Path) -> None:

@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 from diffusers import AutoencoderKL, DDIMScheduler, UNet2DConditionModel
 from transformers import CLIPVisionConfig, CLIPVisionModelWithProjection
 
 from idpose_core.zero123.config import CLIP_MEAN, CLIP_STD, POSE_FEATURES, Zero123Config
+from idpose_core.zero123.errors import ModelLoadError
 
 
 @dataclass
@@ -78,3 +80,11 @@ def inconsistencies(modules: Zero123Modules) -> list[str]:
             f"{unet.cross_attention_dim}"
         )
     return problems
+
+
+def require_fit(modules: Zero123Modules, path: str | Path) -> Zero123Modules:
+    """``modules`` when they fit together, else the ``ModelLoadError`` of the file or folder ``path``."""
+    problems = inconsistencies(modules)
+    if problems:
+        raise ModelLoadError(path, "parts do not fit together: " + "; ".join(problems))
+    return modules

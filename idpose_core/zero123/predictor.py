@@ -95,7 +95,10 @@ class Zero123Predictor:
     def from_ldm_checkpoint(cls, path: str | Path, device: str | torch.device = "auto",
                             dtype: torch.dtype | None = None, config: Zero123Config | None = None,
                             use_ema: bool = False, **options) -> Zero123Predictor:
-        """Load the original single-file release (``zero123-xl.ckpt``, ``105000.ckpt``)."""
+        """Load the original single-file release (``zero123-xl.ckpt``, ``105000.ckpt``).
+
+        ``config`` defaults to the architecture the file's tensor shapes give (``ldm_architecture``).
+        """
         return cls(load_ldm_checkpoint(path, config, use_ema), device, dtype, **options)
 
     @classmethod
