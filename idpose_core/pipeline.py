@@ -1,9 +1,12 @@
 """Views -> camera poses in the anchor frame: the one path the node, the bag evaluator and the demo share.
 
-preprocess_views -> estimate_poses -> anchor_frame_poses. No ROS here.
+Turn each view upright (gravity) -> cut out and frame the object (preprocess_views) -> read each
+view's elevation (gravity) and the anchor's distance (depth) -> invert the model (estimate_poses)
+-> poses of the upright cameras in the anchor frame -> each view's roll put back. No ROS here.
 """
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -12,64 +15,116 @@ import numpy as np
 import torch
 
 from idpose_core.cameras import anchor_frame_poses
+from idpose_core.depth_segmentation import DepthSegmentationError, object_distance
+from idpose_core.deroll import upright_view
+from idpose_core.gravity import polar_angle, with_roll
 from idpose_core.predictor import NoisePredictor
-from idpose_core.preprocessing import PreprocessedViews, preprocess_views
+from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
 from idpose_core.solver import Progress, SolverConfig, SolverResult, estimate_poses
+from idpose_core.view_input import ViewInput
+
+__all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_view_poses", "views_mosaic"]
 
 MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
 LEVEL_POLAR_DEG = 90.0  # the anchor's polar angle when nothing tells it: a level camera
 
 
 @dataclass(frozen=True)
-class ViewInput:
-    """One view as the pipeline takes it: ``rgb`` (H, W, 3) uint8 and, when the image has one, its
-    ``alpha`` (H, W) uint8 (the object mask; otherwise the mask is computed)."""
-
-    rgb: np.ndarray
-    alpha: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
 class PipelineSettings:
     """How to estimate: the solver's settings (``solver.anchor_polar_deg`` is the anchor camera's polar
-    angle around the object, None = level), the anchor's ``object_distance`` (metres, the scale of the
-    published positions) and ``image_size``, the side of the preprocessed views the model sees."""
+    angle around the object, None = level; gravity overrides it), the anchor's ``object_distance``
+    (metres, the scale of the published positions; depth overrides it) and ``image_size``, the side of
+    the preprocessed views the model sees."""
 
     solver: SolverConfig
     object_distance: float = 1.0
     image_size: int = MODEL_IMAGE_SIZE
 
-    @property
-    def anchor_polar(self) -> float:
-        """The anchor's polar angle in radians."""
-        return float(np.radians(self.solver.anchor_polar_deg or LEVEL_POLAR_DEG))
+
+@dataclass(frozen=True)
+class ViewReport:
+    """What the pipeline read off one view: how its mask was made (``mask_method``, and ``mask_note`` when
+    a more trusted source failed), its roll and polar angle from gravity and its object distance from
+    depth (degrees, metres; None without gravity / depth)."""
+
+    mask_method: str
+    mask_note: str
+    roll_deg: float | None
+    polar_deg: float | None
+    distance: float | None
 
 
 @dataclass(frozen=True)
 class PipelineResult:
-    """``poses`` (N, 4, 4): camera k in the anchor camera's optical frame (poses[0] = identity)."""
+    """``poses`` (N, 4, 4): camera k's real optical frame in the anchor camera's (poses[0] = identity);
+    ``anchor_polar_deg`` and ``object_distance`` as used, with where each came from (``polar_source``:
+    "gravity" or "parameter"; ``distance_source``: "depth" or "parameter")."""
 
     poses: np.ndarray
     solver_result: SolverResult
     preprocessed: PreprocessedViews
+    views: list[ViewReport]
+    anchor_polar_deg: float
+    polar_source: str
+    object_distance: float
+    distance_source: str
+
+
+def viewing_ray(view: ViewInput, mask: np.ndarray) -> np.ndarray:
+    """Direction (3,) in the optical frame from the camera to the middle of the object's mask (the optical
+    axis when the intrinsics are unknown)."""
+    if view.intrinsics is None:
+        return np.array([0.0, 0.0, 1.0])
+    x, y, width, height = bounding_box(mask)
+    pixel = np.array([x + (width - 1) / 2.0, y + (height - 1) / 2.0, 1.0])
+    return np.linalg.solve(np.asarray(view.intrinsics, dtype=np.float64), pixel)
+
+
+def view_report(view: ViewInput, mask: np.ndarray, method: str, note: str, roll: float) -> ViewReport:
+    """The view's roll, gravity polar angle and depth distance, where its inputs give them."""
+    gravity = view.gravity_up is not None
+    distance, depth_note = None, ""
+    if view.depth is not None:
+        try:
+            distance = object_distance(view, mask)
+        except DepthSegmentationError as err:
+            depth_note = f"no depth distance: {err}"
+    polar = math.degrees(polar_angle(view.gravity_up, viewing_ray(view, mask))) if gravity else None
+    return ViewReport(method, "; ".join(filter(None, [note, depth_note])), math.degrees(roll) if gravity else None,
+                      polar, distance)
 
 
 def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], settings: PipelineSettings,
                         progress: Progress | None = None, cancel: threading.Event | None = None) -> PipelineResult:
     """Estimate the poses of N >= 2 views, the first one the anchor.
 
-    The predictor's ``solver_defaults`` (the demo model's noise levels) fill the solver settings the
-    caller did not choose. Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and
-    the solver's ``Cancelled`` when ``cancel`` is set.
+    Gravity (``gravity_up``) de-rolls a view, and when the anchor has it, sets the anchor's polar angle and
+    every other view's with it (then searched over azimuth only); the anchor's depth sets the object
+    distance. The predictor's ``solver_defaults`` fill the solver settings the caller did not choose.
+    Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and the solver's ``Cancelled``.
     """
     if len(views) < 2:
         raise ValueError(f"need at least 2 views, got {len(views)}")
-    preprocessed = preprocess_views([view.rgb for view in views], [view.alpha for view in views],
-                                    size=settings.image_size)
-    solver_config = settings.solver.with_recommended(predictor.solver_defaults)
-    solved = estimate_poses(predictor, preprocessed.images, solver_config, progress=progress, cancel=cancel)
-    poses = anchor_frame_poses(solved.rel_poses, settings.anchor_polar, settings.object_distance)
-    return PipelineResult(poses=poses, solver_result=solved, preprocessed=preprocessed)
+    upright, rolls = zip(*(upright_view(view) for view in views))
+    preprocessed = preprocess_views(upright, size=settings.image_size)
+    reports = [view_report(view, mask, method, note, roll) for view, mask, method, note, roll in
+               zip(upright, preprocessed.masks, preprocessed.mask_methods, preprocessed.mask_notes, rolls)]
+    anchor = reports[0]
+    solver = settings.solver
+    known_polar = None
+    if anchor.polar_deg is not None:
+        solver = solver.updated(anchor_polar_deg=min(max(anchor.polar_deg, 1.0), 179.0))
+        known_polar = [math.radians(r.polar_deg - anchor.polar_deg) if r.polar_deg is not None else math.nan
+                       for r in reports[1:]]
+    polar_deg = solver.anchor_polar_deg or LEVEL_POLAR_DEG
+    distance = anchor.distance or settings.object_distance
+    solved = estimate_poses(predictor, preprocessed.images, solver.with_recommended(predictor.solver_defaults),
+                            progress=progress, cancel=cancel, known_polar=known_polar)
+    poses = with_roll(anchor_frame_poses(solved.rel_poses, math.radians(polar_deg), distance), np.array(rolls))
+    return PipelineResult(poses=poses, solver_result=solved, preprocessed=preprocessed, views=reports,
+                          anchor_polar_deg=polar_deg,
+                          polar_source="gravity" if anchor.polar_deg is not None else "parameter",
+                          object_distance=distance, distance_source="depth" if anchor.distance else "parameter")
 
 
 def views_mosaic(images: torch.Tensor) -> np.ndarray:

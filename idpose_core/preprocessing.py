@@ -1,19 +1,25 @@
 """Views -> Zero-1-to-3 inputs, as the paper prepares them: object on white, one shared square window, 256 px.
 
-The foreground mask of a view comes from its alpha channel when it has one; otherwise from its
-background colour when the image border is near-uniform (thresholding); otherwise OpenCV GrabCut,
-seeded with the pixels whose colours are least like the border's, weighted towards the image centre
-(a cluttered photo is assumed to have the object roughly in the middle). One square window serves
-the whole set (the largest mask bounding box side times ``window_scale``), so every view keeps the
-same scale; it is centred on each view's object and padded with white where it leaves the image.
+The foreground mask of a view comes from the most trusted source it has: an external segmentation
+``mask``, else its alpha channel, else its depth image (the object standing on its support plane,
+``idpose_core.depth_segmentation``, boundary settled by GrabCut), else its background colour when the
+image border is near-uniform (thresholding), else OpenCV GrabCut seeded with the pixels whose colours
+are least like the border's, weighted towards the image centre (a cluttered photo is assumed to have
+the object roughly in the middle). One square window serves the whole set (the largest mask bounding
+box side times ``window_scale``), so every view keeps the same scale; it is centred on each view's
+object and padded with white where it leaves the image.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import torch
+
+from idpose_core.depth_segmentation import DepthSegmentationError, depth_cut
+from idpose_core.view_input import ViewInput, ViewInputError
 
 WHITE = (255, 255, 255)
 ALPHA_THRESHOLD = 127  # alpha above this is object
@@ -36,12 +42,14 @@ class PreprocessingError(ValueError):
 @dataclass(frozen=True)
 class PreprocessedViews:
     """``images`` (N, 3, size, size) float32 in [-1, 1]; ``masks`` N bool (H_i, W_i) input-resolution
-    foreground masks; ``mask_methods`` N of "alpha" | "threshold" | "grabcut"; ``windows`` N
-    (x, y, side) square crops in input pixels (may extend past the image, padded white)."""
+    foreground masks; ``mask_methods`` N of ``MASK_METHODS``; ``mask_notes`` N of "" or why a more trusted
+    source could not be used (e.g. the depth found no support plane); ``windows`` N (x, y, side) square crops
+    in input pixels (may extend past the image, padded white)."""
 
     images: torch.Tensor
     masks: list[np.ndarray]
     mask_methods: list[str]
+    mask_notes: list[str]
     windows: list[tuple[int, int, int]]
 
 
@@ -124,16 +132,31 @@ def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
     return cv2.resize(mask, (width, height), interpolation=cv2.INTER_LINEAR) >= 0.5
 
 
-def foreground_mask(rgb: np.ndarray, alpha: np.ndarray | None) -> tuple[np.ndarray, str]:
-    """(mask (H, W) bool, method): "alpha" if ``alpha`` marks anything transparent, else "threshold", else "grabcut"."""
-    if alpha is not None:
-        mask = alpha > ALPHA_THRESHOLD
+MASK_METHODS = ("mask", "alpha", "depth", "threshold", "grabcut")  # most trusted first
+
+
+def foreground_mask(view: ViewInput) -> tuple[np.ndarray, str, str]:
+    """(mask (H, W) bool, method, note) from the most trusted source the view has (``MASK_METHODS``).
+
+    An alpha channel counts only when it marks something transparent; depth needs ``depth`` and
+    ``intrinsics``. ``note`` says why depth, when present, was not used ("" otherwise).
+    """
+    if view.mask is not None:
+        return np.asarray(view.mask, dtype=bool), "mask", ""
+    if view.alpha is not None:
+        mask = view.alpha > ALPHA_THRESHOLD
         if not mask.all():
-            return mask, "alpha"
-    mask = threshold_mask(rgb)
+            return mask, "alpha", ""
+    note = ""
+    if view.depth is not None:
+        try:
+            return depth_cut(view).mask, "depth", ""
+        except DepthSegmentationError as err:
+            note = f"depth not used: {err}"
+    mask = threshold_mask(view.rgb)
     if mask is not None:
-        return mask, "threshold"
-    return grabcut_mask(rgb), "grabcut"
+        return mask, "threshold", note
+    return grabcut_mask(view.rgb), "grabcut", note
 
 
 def on_white(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -162,44 +185,37 @@ def crop_padded(image: np.ndarray, window: tuple[int, int, int]) -> np.ndarray:
     return padded[y + top : y + top + side, x + left : x + left + side]
 
 
-def _check_view(index: int, rgb: np.ndarray, alpha: np.ndarray | None) -> None:
-    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise PreprocessingError(f"view {index}: expected an RGB uint8 array (H, W, 3), got "
-                                 f"{getattr(rgb, 'dtype', type(rgb).__name__)} {getattr(rgb, 'shape', '')}")
-    if min(rgb.shape[:2]) < 8:
-        raise PreprocessingError(f"view {index}: image {rgb.shape[1]}x{rgb.shape[0]} is too small")
-    if alpha is not None and (not isinstance(alpha, np.ndarray) or alpha.dtype != np.uint8
-                              or alpha.shape != rgb.shape[:2]):
-        raise PreprocessingError(f"view {index}: alpha must be uint8 {rgb.shape[:2]}, got "
-                                 f"{getattr(alpha, 'dtype', type(alpha).__name__)} {getattr(alpha, 'shape', '')}")
+def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: float = 1.5) -> PreprocessedViews:
+    """N views -> ``PreprocessedViews`` of (N, 3, size, size): masked to white, one window for all, resized.
 
-
-def preprocess_views(
-    rgbs: list[np.ndarray], alphas: list[np.ndarray | None], size: int = 256, window_scale: float = 1.5
-) -> PreprocessedViews:
-    """N views (RGB uint8 (H_i, W_i, 3), alpha uint8 (H_i, W_i) or None) -> ``PreprocessedViews`` of (N, 3, size, size).
-
-    Raises ``PreprocessingError`` naming the view for a malformed array or an empty object mask.
+    Raises ``PreprocessingError`` naming the view for a malformed array, a too small image or an empty
+    object mask.
     """
-    if len(rgbs) == 0 or len(rgbs) != len(alphas):
-        raise PreprocessingError(f"need one alpha entry (or None) per view, got {len(rgbs)} images and {len(alphas)}")
+    if len(views) == 0:
+        raise PreprocessingError("no views to preprocess")
     if size < 1 or not window_scale > 0:
         raise PreprocessingError(f"size must be >= 1 and window_scale > 0, got {size} and {window_scale}")
-    masks, methods = [], []
-    for index, (rgb, alpha) in enumerate(zip(rgbs, alphas)):
-        _check_view(index, rgb, alpha)
-        mask, method = foreground_mask(rgb, alpha)
+    masks, methods, notes = [], [], []
+    for index, view in enumerate(views):
+        try:
+            view.check(index)
+        except ViewInputError as err:
+            raise PreprocessingError(str(err)) from None
+        if min(view.rgb.shape[:2]) < 8:
+            raise PreprocessingError(f"view {index}: image {view.rgb.shape[1]}x{view.rgb.shape[0]} is too small")
+        mask, method, note = foreground_mask(view)
         if not mask.any():
             raise PreprocessingError(f"view {index}: no object found (empty {method} mask)")
         masks.append(mask)
         methods.append(method)
+        notes.append(note)
     largest_side = max(max(bounding_box(mask)[2:]) for mask in masks)
     side = max(1, int(round(largest_side * window_scale)))
     windows, crops = [], []
-    for rgb, mask in zip(rgbs, masks):
+    for view, mask in zip(views, masks):
         window = square_window(mask, side)
-        crop = crop_padded(on_white(rgb, mask), window)
+        crop = crop_padded(on_white(view.rgb, mask), window)
         crops.append(cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA))
         windows.append(window)
     pixels = torch.from_numpy(np.stack(crops)).permute(0, 3, 1, 2).float()
-    return PreprocessedViews(pixels / 127.5 - 1.0, masks, methods, windows)
+    return PreprocessedViews(pixels / 127.5 - 1.0, masks, methods, notes, windows)

@@ -18,6 +18,7 @@ from tqdm import tqdm
 from idpose_core.preprocessing import preprocess_views
 from idpose_core.spherical import relative
 from idpose_core.synthetic.scenes import ObjectSpec, SceneRenderer, random_camera_spheres
+from idpose_core.view_input import ViewInput
 
 
 @dataclass(frozen=True)
@@ -91,9 +92,8 @@ def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: 
     scales = np.broadcast_to(np.asarray(window_scales, dtype=np.float64), object_index.shape)
     images = []
     for o, a, b, scale in zip(object_index, reference_index, target_index, scales):
-        rgbs = [views.rgb[o, a], views.rgb[o, b]]
-        alphas = [views.mask[o, a].astype(np.uint8) * 255, views.mask[o, b].astype(np.uint8) * 255]
-        images.append(preprocess_views(rgbs, alphas, window_scale=float(scale)).images)
+        pair = [ViewInput(views.rgb[o, k], views.mask[o, k].astype(np.uint8) * 255) for k in (a, b)]
+        images.append(preprocess_views(pair, window_scale=float(scale)).images)
     small = downsample(torch.cat(images))
     small = small.reshape(len(images), 2, *small.shape[1:])
     reference_view = views.cameras[object_index, reference_index]

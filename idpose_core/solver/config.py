@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 VARIANTS = ("full", "tr", "naive")
+KNOWN_POLAR_MODES = ("fixed", "start")
 DEFAULT_POLAR_CANDIDATES_DEG = (-120.0, -60.0, 0.0, 60.0, 120.0)
 ANCHOR_POLAR_STEP_DEG = 45.0
 
@@ -29,7 +30,10 @@ class SolverConfig:
     ``idpose_core.solver.scoring``). ``max_batch`` bounds the samples of one predictor call;
     ``grad_batch`` the samples differentiated together (a gradient step over more, e.g. the adjust
     steps of all candidates, runs forward and backward chunk by chunk, so activation memory stays
-    that of one chunk: full-size Zero-1-to-3 holds about 0.45 GB per float32 sample).
+    that of one chunk: full-size Zero-1-to-3 holds about 0.45 GB per float32 sample). ``known_polar``
+    says what happens to a view's relative polar angle when gravity gives it (``estimate_poses``'s
+    ``known_polar``): "fixed" explores and refines azimuth and radius only, "start" explores at the known
+    polar angle and lets refinement move it.
     """
 
     variant: str = "full"
@@ -51,6 +55,7 @@ class SolverConfig:
     runner_up_steps: int = 100
     ambiguity_deg: float = 30.0
     ambiguity_margin: float = 0.1
+    known_polar: str = "fixed"
 
     def __init__(self, **settings: Any) -> None:
         defaults = {f.name: f.default for f in fields(self)}
@@ -105,6 +110,7 @@ class SolverConfig:
                 raise ValueError(f"SolverConfig.{field} = {getattr(self, field)!r}: must be {rule}")
 
         need(self.variant in VARIANTS, "variant", f"one of {VARIANTS}")
+        need(self.known_polar in KNOWN_POLAR_MODES, "known_polar", f"one of {KNOWN_POLAR_MODES}")
         for name in ("azimuth_candidates", "probe_batch", "keep_top", "average_last", "max_batch",
                      "grad_batch"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 1, name, "an integer >= 1")

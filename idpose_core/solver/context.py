@@ -1,6 +1,7 @@
 """``SolverContext``: the one place the solver talks to the predictor, batched, counted, cancellable."""
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable
 
@@ -24,10 +25,13 @@ class SolverContext:
     """
 
     def __init__(self, predictor: NoisePredictor, views: Views, config: SolverConfig,
-                 progress: Progress | None = None, cancel: threading.Event | None = None):
+                 progress: Progress | None = None, cancel: threading.Event | None = None,
+                 known_polar: torch.Tensor | None = None):
         self.predictor = predictor
         self.views = views
         self.config = config
+        # (N-1,) relative polar angles known from gravity, NaN where unknown
+        self.known_polar = torch.full((len(views) - 1,), math.nan) if known_polar is None else known_polar
         self.device = views.latents.device
         self.dtype = views.latents.dtype
         self.generator = torch.Generator(device="cpu").manual_seed(config.seed)
@@ -64,6 +68,13 @@ class SolverContext:
     def _report(self) -> None:
         if self._progress is not None:
             self._progress(self._stage, self._done, self._total)
+
+    def hold_known_polar(self, pose: torch.Tensor, views: torch.Tensor) -> None:
+        """Zero the polar gradient of the rows of ``pose`` (K, 3) whose view (K,) has a known polar angle,
+        when ``known_polar`` is "fixed" (call between backward and the optimiser step)."""
+        if self.config.known_polar == "fixed" and pose.grad is not None:
+            held = torch.isfinite(self.known_polar[views.cpu() - 1]).to(pose.grad.device)
+            pose.grad[:, 0] = torch.where(held, torch.zeros_like(pose.grad[:, 0]), pose.grad[:, 0])
 
     def check_cancel(self) -> None:
         """Raise ``Cancelled`` when the caller's event is set."""

@@ -5,6 +5,7 @@ import threading
 import time
 from collections.abc import Sequence
 
+import numpy as np
 import torch
 
 from idpose_core.predictor import NoisePredictor
@@ -46,17 +47,26 @@ def validated_images(images: torch.Tensor | Sequence[torch.Tensor]) -> torch.Ten
 
 def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[torch.Tensor],
                    config: SolverConfig | None = None, progress: Progress | None = None,
-                   cancel: threading.Event | None = None) -> SolverResult:
+                   cancel: threading.Event | None = None, known_polar: Sequence[float] | None = None
+                   ) -> SolverResult:
     """Relative poses from view 0 (the anchor) to views 1..N-1 by inverting ``predictor``.
 
     ``images`` (N, 3, H, W) in [-1, 1] (or a sequence of (3, H, W)); ``progress(stage, done, total)``
     is called as samples are evaluated; setting ``cancel`` stops before the next predictor call with
-    ``Cancelled``. Bad input raises ``ValueError`` before the predictor is touched. Seeded by
+    ``Cancelled``. ``known_polar`` (N-1,) are relative polar angles (radians) known from gravity, NaN
+    where unknown: those views search azimuth only (``config.known_polar`` says whether refinement may
+    move them). Bad input raises ``ValueError`` before the predictor is touched. Seeded by
     ``config.seed``: repeated runs on the CPU are identical.
     """
     config = config or SolverConfig()
     config.validate()
     images = validated_images(images)
+    known = None
+    if known_polar is not None:
+        known = torch.as_tensor(np.asarray(known_polar, dtype=np.float64), dtype=torch.float32)
+        if known.shape != (len(images) - 1,) or bool(torch.isinf(known).any()):
+            raise ValueError(f"known_polar must hold {len(images) - 1} finite angles or NaN, got "
+                             f"{np.asarray(known_polar).tolist()}")
     seconds: dict[str, float] = {}
 
     clock = time.perf_counter()
@@ -64,7 +74,7 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
     seconds["encode"] = time.perf_counter() - clock
     if len(views) != len(images):
         raise ValueError(f"predictor encoded {len(views)} views from {len(images)} images")
-    context = SolverContext(predictor, views, config, progress, cancel)
+    context = SolverContext(predictor, views, config, progress, cancel, known)
 
     def timed(stage: str, work):
         start = time.perf_counter()

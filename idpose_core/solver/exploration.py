@@ -1,6 +1,7 @@
 """Exploration: probe a grid of pose candidates per (anchor, view) pair, adjust the better half, keep the best."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,10 +27,11 @@ class ViewCandidates:
     pool_errors: torch.Tensor
 
 
-def candidate_grid(config: SolverConfig) -> torch.Tensor:
-    """Azimuths uniform in [0, 2pi) x polar candidates, relative radius 0; (m * P, 3), azimuth-major."""
+def candidate_grid(config: SolverConfig, known_polar: float = math.nan) -> torch.Tensor:
+    """Azimuths uniform in [0, 2pi) x polar candidates (the one ``known_polar`` when finite), relative
+    radius 0; (m * P, 3), azimuth-major."""
     azimuths = np.arange(config.azimuth_candidates) * (2.0 * np.pi / config.azimuth_candidates)
-    polars = config.polar_candidates()
+    polars = [known_polar] if math.isfinite(known_polar) else config.polar_candidates()
     grid = [(polar, azimuth, 0.0) for azimuth in azimuths for polar in polars]
     return torch.tensor(grid, dtype=torch.float32)
 
@@ -48,37 +50,41 @@ def adjust(ctx: SolverContext, starts: torch.Tensor, views: torch.Tensor) -> tor
         optimiser.zero_grad()
         ctx.gradient_step(anchor if forward else views, views if forward else anchor,
                           pose if forward else invert(pose))
+        ctx.hold_known_polar(pose, views)
         optimiser.step()
     return pose.detach().cpu()
 
 
 def explore(ctx: SolverContext, view_count: int) -> list[ViewCandidates]:
-    """Candidates for every view 1..N-1 relative to the anchor, each view's work batched with the others'."""
-    config = ctx.config
-    grid = candidate_grid(config)
-    pairs, size = view_count - 1, len(grid)
-    half = max(size // 2, 1) if config.adjust_steps > 0 else 0
-    probe = 2 * config.probe_batch
-    ctx.begin_stage("exploration", pairs * (size * probe + half * (config.adjust_steps + probe)))
+    """Candidates for every view 1..N-1 relative to the anchor, each view's work batched with the others'.
 
-    targets = torch.arange(1, view_count).repeat_interleave(size)
-    errors = ctx.pairwise_errors(torch.zeros_like(targets), targets, grid.repeat(pairs, 1)).view(pairs, size)
-    order = torch.argsort(errors, dim=1, stable=True)
-    pool_poses, pool_errors = grid.expand(pairs, size, 3), errors
-    if half:
-        starts = grid[order[:, :half]].reshape(-1, 3)
-        targets = torch.arange(1, view_count).repeat_interleave(half)
+    A view whose relative polar angle is known (``ctx.known_polar``) searches azimuth only.
+    """
+    config = ctx.config
+    grids = [candidate_grid(config, float(polar)) for polar in ctx.known_polar[:view_count - 1]]
+    sizes = [len(grid) for grid in grids]
+    halves = [max(size // 2, 1) if config.adjust_steps > 0 else 0 for size in sizes]
+    probe = 2 * config.probe_batch
+    ctx.begin_stage("exploration", sum(size * probe + half * (config.adjust_steps + probe)
+                                       for size, half in zip(sizes, halves)))
+
+    views = torch.arange(1, view_count)
+    targets = views.repeat_interleave(torch.tensor(sizes))
+    errors = torch.split(ctx.pairwise_errors(torch.zeros_like(targets), targets, torch.cat(grids)), sizes)
+    pool_poses, pool_errors = list(grids), list(errors)
+    choice_poses, choice_errors = list(grids), list(errors)
+    if any(halves):
+        starts = torch.cat([grid[torch.argsort(error, stable=True)[:half]]
+                            for grid, error, half in zip(grids, errors, halves)])
+        targets = views.repeat_interleave(torch.tensor(halves))
         adjusted = adjust(ctx, starts, targets)
-        adjusted_errors = ctx.pairwise_errors(torch.zeros_like(targets), targets, adjusted).view(pairs, half)
-        pool_poses = torch.cat([pool_poses, adjusted.view(pairs, half, 3)], dim=1)
-        pool_errors = torch.cat([errors, adjusted_errors], dim=1)
-        choice_poses, choice_errors = adjusted.view(pairs, half, 3), adjusted_errors
-    else:
-        choice_poses, choice_errors = grid.expand(pairs, size, 3), errors
+        adjusted_errors = ctx.pairwise_errors(torch.zeros_like(targets), targets, adjusted)
+        choice_poses, choice_errors = list(torch.split(adjusted, halves)), list(torch.split(adjusted_errors, halves))
+        pool_poses = [torch.cat([grid, more]) for grid, more in zip(grids, choice_poses)]
+        pool_errors = [torch.cat([error, more]) for error, more in zip(errors, choice_errors)]
 
     result = []
-    for view in range(pairs):
-        best = torch.argsort(choice_errors[view], stable=True)[: config.keep_top]
-        result.append(ViewCandidates(choice_poses[view, best], choice_errors[view, best],
-                                     pool_poses[view], pool_errors[view]))
+    for poses, errors, all_poses, all_errors in zip(choice_poses, choice_errors, pool_poses, pool_errors):
+        best = torch.argsort(errors, stable=True)[: config.keep_top]
+        result.append(ViewCandidates(poses[best], errors[best], all_poses, all_errors))
     return result

@@ -66,6 +66,7 @@ def refine(ctx: SolverContext, start: torch.Tensor, variant: str, steps_per_view
             pose = compose(invert(first), second)
         optimiser.zero_grad()
         ctx.gradient_step(torch.tensor([ref]), torch.tensor([tgt]), pose[None])
+        ctx.hold_known_polar(poses, torch.arange(1, count))
         optimiser.step()
         history[updated - 1].append(poses[updated - 1].detach().cpu().clone())
     return torch.stack([mean_pose(torch.stack(h[-config.average_last:])) if h else start[k].cpu()

@@ -19,6 +19,8 @@ import numpy as np
 import pybullet
 import pybullet_data
 
+from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
+from idpose_core.gravity import rz
 from idpose_core.spherical import spherical_to_cartesian
 
 CAMERA_RADIUS = 2.0
@@ -102,6 +104,55 @@ def camera_up(polar: float, azimuth: float) -> np.ndarray:
                      math.sin(polar)])
 
 
+def add_object(client: int, spec: ObjectSpec, centre: tuple[float, float, float] = (0.0, 0.0, 0.0),
+               radius: float = OBJECT_RADIUS, yaw_deg: float = 0.0) -> int:
+    """Create the object's parts as one fixed multibody in pybullet ``client``: its bounding box centred on
+    ``centre``, scaled into a sphere of ``radius``, turned by ``yaw_deg`` about +z. Returns the body id."""
+    box_centre, factor = normalisation(spec)
+    factor *= radius / OBJECT_RADIUS
+    shapes, positions, orientations = [], [], []
+    for part in spec.parts:
+        shapes.append(pybullet.createVisualShape(
+            pybullet.GEOM_MESH,
+            fileName=str(DATA_PATH / part.mesh),
+            meshScale=[s * factor for s in part.scale],
+            rgbaColor=list(part.rgba),
+            physicsClientId=client,
+        ))
+        positions.append(list((np.asarray(part.position) - box_centre) * factor))
+        orientations.append(_quaternion(part.orientation_deg))
+    count = len(shapes)  # every part is a fixed link of an invisible base at the centre
+    body = pybullet.createMultiBody(
+        baseMass=0,
+        basePosition=list(centre),
+        baseOrientation=_quaternion((0.0, 0.0, yaw_deg)),
+        linkMasses=[0] * count,
+        linkCollisionShapeIndices=[-1] * count,
+        linkVisualShapeIndices=shapes,
+        linkPositions=positions,
+        linkOrientations=orientations,
+        linkInertialFramePositions=[[0, 0, 0]] * count,
+        linkInertialFrameOrientations=[[0, 0, 0, 1]] * count,
+        linkParentIndices=[0] * count,
+        linkJointTypes=[pybullet.JOINT_FIXED] * count,
+        linkJointAxis=[[0, 0, 1]] * count,
+        physicsClientId=client,
+    )
+    for link, part in enumerate(spec.parts):
+        if part.texture is not None:
+            texture = pybullet.loadTexture(str(DATA_PATH / part.texture), physicsClientId=client)
+            pybullet.changeVisualShape(body, link, textureUniqueId=texture, physicsClientId=client)
+    return body
+
+
+def rolled_optical_frames(spheres: np.ndarray, rolls: np.ndarray) -> np.ndarray:
+    """Optical camera-to-world frames (N, 4, 4) of cameras at ``spheres`` (N, 3) = (polar, azimuth, radius)
+    looking at the origin, each turned about its optical axis by ``rolls`` (N,) radians."""
+    turns = np.tile(np.eye(4), (len(rolls), 1, 1))
+    turns[:, :3, :3] = np.stack([rz(float(roll)) for roll in rolls])
+    return opengl_to_optical(spherical_to_c2w(np.asarray(spheres, dtype=np.float64))) @ turns
+
+
 class SceneRenderer:
     """Renders one object from spherical camera poses in its own pybullet DIRECT client.
 
@@ -118,50 +169,21 @@ class SceneRenderer:
         self.image_size = int(image_size)
         self.fov_deg = float(fov_deg)
         self._client = pybullet.connect(pybullet.DIRECT)
-        self._build(spec)
+        add_object(self._client, spec)
 
-    def _build(self, spec: ObjectSpec) -> None:
-        """Create the object's parts as one fixed multibody, centred and scaled."""
-        centre, factor = normalisation(spec)
-        shapes, positions, orientations = [], [], []
-        for part in spec.parts:
-            shapes.append(pybullet.createVisualShape(
-                pybullet.GEOM_MESH,
-                fileName=str(DATA_PATH / part.mesh),
-                meshScale=[s * factor for s in part.scale],
-                rgbaColor=list(part.rgba),
-                physicsClientId=self._client,
-            ))
-            positions.append(list((np.asarray(part.position) - centre) * factor))
-            orientations.append(_quaternion(part.orientation_deg))
-        count = len(shapes)  # every part is a fixed link of an invisible base at the origin
-        self._body = pybullet.createMultiBody(
-            baseMass=0,
-            linkMasses=[0] * count,
-            linkCollisionShapeIndices=[-1] * count,
-            linkVisualShapeIndices=shapes,
-            linkPositions=positions,
-            linkOrientations=orientations,
-            linkInertialFramePositions=[[0, 0, 0]] * count,
-            linkInertialFrameOrientations=[[0, 0, 0, 1]] * count,
-            linkParentIndices=[0] * count,
-            linkJointTypes=[pybullet.JOINT_FIXED] * count,
-            linkJointAxis=[[0, 0, 1]] * count,
-            physicsClientId=self._client,
-        )
-        for link, part in enumerate(spec.parts):
-            if part.texture is not None:
-                texture = pybullet.loadTexture(str(DATA_PATH / part.texture), physicsClientId=self._client)
-                pybullet.changeVisualShape(self._body, link, textureUniqueId=texture,
-                                           physicsClientId=self._client)
-
-    def render(self, polar: float, azimuth: float, radius: float = CAMERA_RADIUS
+    def render(self, polar: float, azimuth: float, radius: float = CAMERA_RADIUS, roll: float = 0.0
                ) -> tuple[np.ndarray, np.ndarray]:
-        """RGB uint8 (H, W, 3) with white background and foreground mask bool (H, W)."""
+        """RGB uint8 (H, W, 3) with white background and foreground mask bool (H, W).
+
+        ``roll`` (radians) turns the camera about its optical axis: its optical frame is the upright
+        one's times ``rz(roll)`` (``idpose_core.gravity``), as ``rolled_optical_frames`` gives it.
+        """
         if radius <= OBJECT_RADIUS:
             raise ValueError(f"radius {radius} puts the camera inside the object (radius {OBJECT_RADIUS})")
         eye = spherical_to_cartesian(np.array([polar, azimuth, radius], dtype=np.float64))
-        view = pybullet.computeViewMatrix(list(eye), [0.0, 0.0, 0.0], list(camera_up(polar, azimuth)))
+        up = camera_up(polar, azimuth) if roll == 0.0 else -rolled_optical_frames(
+            np.array([[polar, azimuth, radius]]), np.array([roll]))[0, :3, 1]
+        view = pybullet.computeViewMatrix(list(eye), [0.0, 0.0, 0.0], list(up))
         projection = pybullet.computeProjectionMatrixFOV(
             fov=self.fov_deg, aspect=1.0, nearVal=max(radius - 2 * OBJECT_RADIUS, 0.05),
             farVal=radius + 2 * OBJECT_RADIUS)

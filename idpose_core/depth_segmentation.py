@@ -1,0 +1,226 @@
+"""The object on a table, cut out with an aligned depth image and no learnt weights.
+
+Back-project the depth with the intrinsics, find the support plane by RANSAC (the largest plane whose
+normal points up: along gravity when it is known, else towards the top of the image), keep what
+stands above it, split that into connected pieces at depth jumps (an object in front of another is a
+different piece), take the target's piece (the one in the region of interest, else the one nearest
+the image centre) and let GrabCut, seeded from it, settle the boundary the depth leaves ragged.
+Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from idpose_core.view_input import ViewInput
+
+RANSAC_ITERATIONS = 300
+RANSAC_SAMPLE = 4000  # points scored per plane hypothesis
+PLANE_TOLERANCE = 0.01  # m, or this share of the median depth when larger: a point on the plane
+MIN_PLANE_SHARE = 0.1  # of the valid points: a smaller plane is no support
+UP_TOLERANCE_DEG = 30.0  # the plane normal vs gravity's up (when known)
+IMAGE_UP_MIN = 0.3  # without gravity: the normal's component towards the top of the image at least this
+MIN_HEIGHT = 0.008  # m, or 1.5 % of the median depth when larger: standing on the plane
+DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
+MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
+GRABCUT_ITERATIONS = 4
+GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
+CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
+
+
+class DepthSegmentationError(ValueError):
+    """Depth cannot cut the object out here (no intrinsics, too few readings, no plane, nothing above it)."""
+
+
+@dataclass(frozen=True)
+class Plane:
+    """Points p with ``normal . p + offset = 0``; ``normal`` (3,) unit, pointing to the side the camera is on."""
+
+    normal: np.ndarray
+    offset: float
+
+    def height(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (...,) of points (..., 3) from the plane, positive on the camera's side."""
+        return points @ self.normal + self.offset
+
+
+@dataclass(frozen=True)
+class DepthCut:
+    """``mask`` (H, W) bool of the target; ``depth_mask`` before GrabCut; the support ``plane``."""
+
+    mask: np.ndarray
+    depth_mask: np.ndarray
+    plane: Plane
+
+
+def backproject(depth: np.ndarray, intrinsics: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points (H, W, 3) in the optical frame and the valid-reading mask (H, W) of a depth image (metres)."""
+    depth = np.asarray(depth, dtype=np.float64)
+    valid = np.isfinite(depth) & (depth > 0)
+    z = np.where(valid, depth, 0.0)
+    rows, cols = np.indices(depth.shape, dtype=np.float64)
+    k = np.asarray(intrinsics, dtype=np.float64)
+    x = (cols - k[0, 2]) * z / k[0, 0]
+    y = (rows - k[1, 2]) * z / k[1, 1]
+    return np.stack([x, y, z], axis=-1), valid
+
+
+def _tolerance(points: np.ndarray, base: float, share: float) -> float:
+    return max(base, share * float(np.median(points[:, 2])))
+
+
+def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Generator) -> Plane:
+    """The largest plane among ``points`` (M, 3) that can carry an object: its normal within
+    ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top.
+    DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
+    if len(points) < 3:
+        raise DepthSegmentationError("too few depth readings to find a support plane")
+    tolerance = _tolerance(points, PLANE_TOLERANCE, 0.01)
+    scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]
+    triples = points[rng.integers(0, len(points), size=(RANSAC_ITERATIONS, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    usable = lengths > 1e-12
+    normals = normals[usable] / lengths[usable, None]
+    anchors = triples[usable, 0]
+    normals *= np.where(np.sum(normals * anchors, axis=1) > 0, -1.0, 1.0)[:, None]  # towards the camera
+    if up is not None:
+        usable = normals @ np.asarray(up, dtype=np.float64) >= math.cos(math.radians(UP_TOLERANCE_DEG))
+    else:
+        usable = -normals[:, 1] >= IMAGE_UP_MIN
+    normals, anchors = normals[usable], anchors[usable]
+    if len(normals) == 0:
+        raise DepthSegmentationError("no support plane facing up in the depth image")
+    offsets = -np.sum(normals * anchors, axis=1)
+    inliers = np.abs(scored @ normals.T + offsets) < tolerance  # (sample, hypotheses)
+    best = int(np.argmax(inliers.sum(axis=0)))
+    share = float(inliers[:, best].mean())
+    if share < MIN_PLANE_SHARE:
+        raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * share:.0f} % "
+                                     f"of the readings, {100 * MIN_PLANE_SHARE:.0f} % needed)")
+    on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
+    centre = on_plane.mean(axis=0)
+    normal = np.linalg.svd(on_plane - centre)[2][2]
+    normal = normal if normal @ normals[best] > 0 else -normal
+    return Plane(normal, float(-normal @ centre))
+
+
+def _pieces(above: np.ndarray, depth: np.ndarray) -> tuple[int, np.ndarray]:
+    """Connected pieces of ``above`` that no depth jump crosses: (count, labels)."""
+    z = np.where(above, depth, 0.0)
+    jump = np.zeros_like(above)
+    for axis in (0, 1):
+        step = np.abs(np.diff(z, axis=axis)) > DEPTH_JUMP * np.maximum(
+            np.minimum(z[:-1] if axis == 0 else z[:, :-1], z[1:] if axis == 0 else z[:, 1:]), 1e-6)
+        if axis == 0:
+            jump[:-1] |= step
+        else:
+            jump[:, :-1] |= step
+    count, labels = cv2.connectedComponents((above & ~jump).astype(np.uint8), connectivity=4)
+    return count, labels
+
+
+def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] | None) -> np.ndarray:
+    """The target's piece (H, W) bool: most pixels inside ``roi``, else the centroid nearest the image centre
+    (pieces under ``MIN_PIECE_SHARE`` of the image ignored). DepthSegmentationError when none is left."""
+    height, width = labels.shape
+    areas = np.bincount(labels.ravel(), minlength=count)
+    areas[0] = 0
+    candidates = np.flatnonzero(areas >= MIN_PIECE_SHARE * height * width)
+    if len(candidates) == 0:
+        raise DepthSegmentationError("nothing stands on the support plane")
+    if roi is not None:
+        x, y, w, h = roi
+        window = labels[max(y, 0):y + h, max(x, 0):x + w]
+        inside = np.bincount(window.ravel(), minlength=count)[candidates]
+        if inside.max() > 0:
+            return labels == candidates[int(np.argmax(inside))]
+    rows, cols = np.indices(labels.shape)
+    sums_r = np.bincount(labels.ravel(), weights=rows.ravel(), minlength=count)
+    sums_c = np.bincount(labels.ravel(), weights=cols.ravel(), minlength=count)
+    centres = np.stack([sums_r[candidates], sums_c[candidates]], axis=1) / areas[candidates, None]
+    offsets = np.linalg.norm((centres - [(height - 1) / 2, (width - 1) / 2]) / [height, width], axis=1)
+    return labels == candidates[int(np.argmin(offsets))]
+
+
+def _fill_holes(mask: np.ndarray) -> np.ndarray:
+    """The mask with every hole closed (what the outer contours enclose)."""
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    filled = np.zeros(mask.shape, np.uint8)
+    cv2.drawContours(filled, contours, -1, 1, thickness=cv2.FILLED)
+    return filled.astype(bool)
+
+
+def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """GrabCut on a window around ``seed`` (H, W) bool: the seed but its outermost pixels is object,
+    ``background`` and what lies beyond a band around the seed are background, the rest is left to the
+    colours. Seeds OpenCV's RNG."""
+    x, y, w, h = cv2.boundingRect(seed.astype(np.uint8))
+    band = max(2, int(round(GRABCUT_BAND * math.hypot(w, h))))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
+    edge = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * CORE_MARGIN + 1, 2 * CORE_MARGIN + 1))
+    core = cv2.erode(seed.astype(np.uint8), edge).astype(bool)
+    reach = cv2.dilate(seed.astype(np.uint8), kernel).astype(bool)
+    labels = np.full(seed.shape, cv2.GC_BGD, np.uint8)
+    labels[reach] = cv2.GC_PR_BGD
+    labels[seed] = cv2.GC_PR_FGD
+    labels[reach & background & ~seed] = cv2.GC_BGD
+    labels[core] = cv2.GC_FGD
+    if not core.any():  # a thin object: keep the depth's answer
+        return seed
+    margin = 2 * band
+    top, left = max(0, y - margin), max(0, x - margin)
+    bottom, right = min(seed.shape[0], y + h + margin), min(seed.shape[1], x + w + margin)
+    window = labels[top:bottom, left:right].copy()
+    cv2.setRNGSeed(0)
+    cv2.grabCut(np.ascontiguousarray(rgb[top:bottom, left:right]), window, None, np.zeros((1, 65)),
+                np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
+    refined = np.zeros(seed.shape, bool)
+    refined[top:bottom, left:right] = np.isin(window, (cv2.GC_FGD, cv2.GC_PR_FGD))
+    count, parts = cv2.connectedComponents(refined.astype(np.uint8), connectivity=8)
+    if count > 2:  # keep the part that holds the core
+        refined = parts == np.bincount(parts[core], minlength=count)[1:].argmax() + 1
+    return refined
+
+
+def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
+    """Cut the target out of ``view`` with its depth (needs ``depth`` and ``intrinsics``; ``gravity_up``
+    and ``roi`` help). DepthSegmentationError says why depth cannot do it, for a fallback."""
+    if view.depth is None or view.intrinsics is None:
+        raise DepthSegmentationError("depth segmentation needs a depth image and the camera intrinsics")
+    points, valid = backproject(view.depth, view.intrinsics)
+    if valid.mean() < 0.05:
+        raise DepthSegmentationError(f"only {100 * valid.mean():.0f} % of the depth image has readings")
+    plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(seed))
+    height = plane.height(points)
+    above = valid & (height > _tolerance(points[valid], MIN_HEIGHT, 0.015))
+    count, labels = _pieces(above, np.where(valid, view.depth, 0.0))
+    piece = _fill_holes(target_piece(labels, count, view.roi))
+    on_plane = valid & (np.abs(height) < _tolerance(points[valid], PLANE_TOLERANCE, 0.01))
+    mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
+    return DepthCut(mask=mask, depth_mask=piece, plane=plane)
+
+
+def object_distance(view: ViewInput, mask: np.ndarray) -> float:
+    """Camera to object centre (m) from the depth of the object's visible points.
+
+    The visible surface lies in front of the centre: for a ball of radius r its mean depth is
+    ``D - 2r/3`` while it spans ``2r`` across, so the centre is taken at the visible points' mean
+    distance plus a third of their extent across the view (5th to 95th percentile). Exact for a ball,
+    within a sixth of the size for a box seen face on. DepthSegmentationError without readings.
+    """
+    if view.depth is None or view.intrinsics is None:
+        raise DepthSegmentationError("the object distance needs a depth image and the camera intrinsics")
+    points, valid = backproject(view.depth, view.intrinsics)
+    visible = points[valid & mask]
+    if len(visible) < 10:
+        raise DepthSegmentationError(f"only {len(visible)} depth readings on the object")
+    centre = visible.mean(axis=0)
+    ray = centre / np.linalg.norm(centre)
+    across = visible - np.outer(visible @ ray, ray)
+    basis = np.linalg.svd(across - across.mean(axis=0), full_matrices=False)[2][:2]
+    spans = [np.subtract(*np.percentile(across @ axis, [95, 5])) for axis in basis]
+    return float(np.linalg.norm(centre) + max(spans) / 3.0)

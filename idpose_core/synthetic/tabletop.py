@@ -1,0 +1,203 @@
+"""A robot's view of an object: the target on a textured table among other objects, in a room, by an RGB-D camera.
+
+Metric units. The world origin is the target's centre (its bounding-box centre, as for the white-
+background scenes), world up +z; the table top lies under the target, the room's floor 0.75 m below
+it and four textured walls around. Distractors stand on the table around the target, one of them
+close behind it as seen from the first camera. A render gives the colour image (no alpha), the depth
+along the optical axis in metres, and the target's true mask.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet
+
+from idpose_core.synthetic.scenes import (
+    DATA_PATH,
+    OBJECT_RADIUS,
+    ObjectSpec,
+    Part,
+    _part_vertices,
+    add_object,
+    normalisation,
+)
+
+TARGET_RADIUS = 0.1  # m: the target fits a ball of this radius (a 20 cm object)
+TABLE_SIZE = (1.4, 1.0, 0.04)  # m
+FLOOR_DROP = 0.75  # m from the table top to the floor
+ROOM_HALF_SIDE = 1.8  # m
+WALL_HEIGHT = 2.5  # m
+TABLE_TEXTURES = ("table/table.png", "checker_grid.jpg", "tray/tray.jpg", "domino/domino.jpg")
+WALL_TEXTURES = ("tex256.png", "uvmap.png", "checker_blue.png", "jenga/jenga.png", "cube.png")
+DISTRACTOR_TEXTURES = ("jenga/jenga.png", "domino/domino.jpg", "checker_blue.png", "uvmap.png")
+_COLOURS = ((0.85, 0.3, 0.2, 1.0), (0.2, 0.5, 0.85, 1.0), (0.3, 0.7, 0.3, 1.0), (0.9, 0.8, 0.2, 1.0),
+            (0.6, 0.3, 0.7, 1.0), (0.2, 0.75, 0.8, 1.0))
+
+
+@dataclass(frozen=True)
+class Placement:
+    """An object in the scene: bounding-box ``centre`` (m), fitted into a ball of ``radius``, turned ``yaw_deg``."""
+
+    spec: ObjectSpec
+    centre: tuple[float, float, float]
+    radius: float
+    yaw_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Light:
+    """TinyRenderer's light: direction (towards the light), ambient and diffuse shares, cast shadows or not."""
+
+    direction: tuple[float, float, float]
+    ambient: float
+    diffuse: float
+    shadow: bool
+
+
+@dataclass(frozen=True)
+class TabletopLayout:
+    """Everything a render depends on besides the camera."""
+
+    target: Placement
+    distractors: tuple[Placement, ...]
+    table_top: float  # z of the table top (m)
+    table_texture: str
+    wall_textures: tuple[str, str, str, str]
+    light: Light
+
+
+def half_height(spec: ObjectSpec, radius: float) -> float:
+    """Half the height (m) of the object's bounding box once fitted into a ball of ``radius``."""
+    vertices = np.concatenate([_part_vertices(part) for part in spec.parts])
+    _, factor = normalisation(spec)
+    return 0.5 * float(np.ptp(vertices[:, 2])) * factor * radius / OBJECT_RADIUS
+
+
+def _distractor_pool(rng: np.random.Generator, count: int) -> list[ObjectSpec]:
+    """Blobs (``random_urdfs`` 700..) in plain colours and textured boxes, none of them a demo object."""
+    specs = []
+    for k in range(count):
+        if rng.random() < 0.5:
+            index = 700 + int(rng.integers(0, 200))
+            colour = _COLOURS[int(rng.integers(len(_COLOURS)))]
+            specs.append(ObjectSpec(f"blob_{index}", (Part(f"random_urdfs/{index:03d}/{index:03d}.obj", rgba=colour),)))
+        else:
+            sides = tuple(float(v) for v in rng.uniform(0.4, 1.0, size=3))
+            texture = DISTRACTOR_TEXTURES[int(rng.integers(len(DISTRACTOR_TEXTURES)))]
+            specs.append(ObjectSpec(f"box_{k}", (Part("cube.obj", scale=sides, texture=texture),)))
+    return specs
+
+
+def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: float) -> TabletopLayout:
+    """A seeded scene around ``target``: 2-4 distractors (one close behind the target as seen from azimuth
+    ``behind_azimuth + pi``, the others 0.2-0.5 m away, none overlapping), random textures and light."""
+    table_top = -half_height(target, TARGET_RADIUS)
+    placed: list[Placement] = []
+    count = int(rng.integers(2, 5))
+    for k, spec in enumerate(_distractor_pool(rng, count)):
+        radius = float(rng.uniform(0.05, 0.1))
+        for _ in range(100):
+            if k == 0:
+                distance, azimuth = TARGET_RADIUS + radius + 0.02, behind_azimuth + math.pi + rng.uniform(-0.3, 0.3)
+            else:
+                distance, azimuth = rng.uniform(0.2, 0.5), rng.uniform(0.0, 2.0 * math.pi)
+            x, y = distance * math.cos(azimuth), distance * math.sin(azimuth)
+            clear = all(math.hypot(x - p.centre[0], y - p.centre[1]) > radius + p.radius + 0.02 for p in placed)
+            if clear:
+                break
+        z = table_top + half_height(spec, radius)
+        placed.append(Placement(spec, (x, y, z), radius, float(rng.uniform(0.0, 360.0))))
+    elevation, direction = rng.uniform(math.radians(35), math.radians(75)), rng.uniform(0.0, 2.0 * math.pi)
+    light = Light((math.cos(elevation) * math.cos(direction), math.cos(elevation) * math.sin(direction),
+                   math.sin(elevation)), float(rng.uniform(0.5, 0.7)), float(rng.uniform(0.4, 0.6)), True)
+    walls = tuple(WALL_TEXTURES[int(i)] for i in rng.integers(0, len(WALL_TEXTURES), size=4))
+    return TabletopLayout(
+        target=Placement(target, (0.0, 0.0, 0.0), TARGET_RADIUS, 0.0),
+        distractors=tuple(placed), table_top=table_top,
+        table_texture=TABLE_TEXTURES[int(rng.integers(len(TABLE_TEXTURES)))], wall_textures=walls, light=light)
+
+
+@dataclass(frozen=True)
+class TabletopFrame:
+    """One render: ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 metres along the optical axis,
+    ``target_mask`` (H, W) bool (the target's visible pixels)."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    target_mask: np.ndarray
+
+
+class TabletopRenderer:
+    """Renders a ``TabletopLayout`` from optical camera poses in its own pybullet DIRECT client (a context
+    manager, or call ``close()``)."""
+
+    def __init__(self, layout: TabletopLayout, image_size: int = 320, fov_deg: float = 60.0,
+                 near: float = 0.05, far: float = 6.0):
+        self.layout, self.image_size, self.fov_deg, self.near, self.far = layout, image_size, fov_deg, near, far
+        self._client = pybullet.connect(pybullet.DIRECT)
+        self._target = add_object(self._client, layout.target.spec, layout.target.centre, layout.target.radius,
+                                  layout.target.yaw_deg)
+        for placement in layout.distractors:
+            add_object(self._client, placement.spec, placement.centre, placement.radius, placement.yaw_deg)
+        width, depth, thickness = TABLE_SIZE
+        top = layout.table_top
+        self._box((0.0, 0.0, top - thickness / 2), (width, depth, thickness), layout.table_texture)
+        for x in (-0.6 * width / 1.4, 0.6 * width / 1.4):
+            for y in (-0.4 * depth, 0.4 * depth):
+                self._box((x, y, top - FLOOR_DROP / 2), (0.05, 0.05, FLOOR_DROP - thickness), None, (0.3, 0.25, 0.2, 1))
+        floor = top - FLOOR_DROP
+        side = 2 * ROOM_HALF_SIDE
+        self._box((0.0, 0.0, floor - 0.01), (side, side, 0.02), "checker_grid.jpg")
+        for k, (x, y, sx, sy) in enumerate(((ROOM_HALF_SIDE, 0, 0.02, side), (-ROOM_HALF_SIDE, 0, 0.02, side),
+                                            (0, ROOM_HALF_SIDE, side, 0.02), (0, -ROOM_HALF_SIDE, side, 0.02))):
+            self._box((x, y, floor + WALL_HEIGHT / 2), (sx, sy, WALL_HEIGHT), layout.wall_textures[k])
+
+    def _box(self, centre, sides, texture: str | None, rgba=(1.0, 1.0, 1.0, 1.0)) -> None:
+        """A textured box (cube.obj spans 1 m per side; its UVs carry the texture)."""
+        shape = pybullet.createVisualShape(pybullet.GEOM_MESH, fileName=str(DATA_PATH / "cube.obj"),
+                                           meshScale=list(sides), rgbaColor=list(rgba), physicsClientId=self._client)
+        body = pybullet.createMultiBody(baseMass=0, baseVisualShapeIndex=shape, basePosition=list(centre),
+                                        physicsClientId=self._client)
+        if texture is not None:
+            texture_id = pybullet.loadTexture(str(DATA_PATH / texture), physicsClientId=self._client)
+            pybullet.changeVisualShape(body, -1, textureUniqueId=texture_id, physicsClientId=self._client)
+
+    def render(self, world_from_optical: np.ndarray) -> TabletopFrame:
+        """The scene seen by an optical camera at ``world_from_optical`` (4, 4) (REP 103 axes)."""
+        frame = np.asarray(world_from_optical, dtype=np.float64)
+        eye, forward, image_up = frame[:3, 3], frame[:3, 2], -frame[:3, 1]
+        view = pybullet.computeViewMatrix(list(eye), list(eye + forward), list(image_up))
+        projection = pybullet.computeProjectionMatrixFOV(fov=self.fov_deg, aspect=1.0, nearVal=self.near,
+                                                         farVal=self.far)
+        size, light = self.image_size, self.layout.light
+        _, _, rgba, depth_buffer, segmentation = pybullet.getCameraImage(
+            size, size, viewMatrix=view, projectionMatrix=projection, renderer=pybullet.ER_TINY_RENDERER,
+            lightDirection=list(light.direction), lightAmbientCoeff=light.ambient, lightDiffuseCoeff=light.diffuse,
+            lightSpecularCoeff=0.05, shadow=int(light.shadow), physicsClientId=self._client)
+        rgb = np.asarray(rgba, dtype=np.uint8).reshape(size, size, 4)[..., :3].copy()
+        buffer = np.asarray(depth_buffer, dtype=np.float64).reshape(size, size)
+        depth = self.far * self.near / (self.far - (self.far - self.near) * buffer)
+        mask = np.asarray(segmentation).reshape(size, size) == self._target
+        return TabletopFrame(rgb, depth.astype(np.float32), mask)
+
+    def close(self) -> None:
+        """Disconnect the pybullet client (idempotent)."""
+        if self._client is not None:
+            pybullet.disconnect(physicsClientId=self._client)
+            self._client = None
+
+    def __enter__(self) -> TabletopRenderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def tabletop_cameras(rng: np.random.Generator, count: int, polar_deg: tuple[float, float] = (45.0, 75.0),
+                     distance: tuple[float, float] = (0.45, 0.65)) -> np.ndarray:
+    """``count`` cameras (count, 3) = (polar, azimuth, radius) above the table looking at the target."""
+    low, high = (math.radians(a) for a in polar_deg)
+    return np.stack([rng.uniform(low, high, count), rng.uniform(0.0, 2.0 * math.pi, count),
+                     rng.uniform(*distance, count)], axis=-1)
