@@ -10,20 +10,18 @@ OpenGL camera axes, as ``idpose_core.metrics`` expects. Relative radii are in Ze
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from idpose_core.cameras import (
     ZERO123_RADIUS,
-    apply_relative,
     c2w_to_spherical,
     opengl_to_optical,
     relative_spherical,
-    spherical_to_c2w,
 )
-from idpose_core.metrics import pair_errors
-from idpose_core.spherical import relative
+from idpose_core.metrics import camera_errors
 
 PICK_SIZE = 8
 VIEW_COUNTS = (2, 4, 6, 8)
@@ -34,13 +32,16 @@ class ViewSetEstimate:
     """What an estimator returns for n views: what the node publishes, and the solver's confidence.
 
     ``poses`` (n, 4, 4) optical camera poses in the anchor camera's frame (poses[0] = identity);
-    ``scores`` and ``ambiguous`` (n-1,) per non-anchor view; ``seconds`` the wall time of the estimate.
+    ``scores`` and ``ambiguous`` (n-1,) per non-anchor view; ``seconds`` the wall time of the estimate;
+    ``details`` what the estimate read off its views (JSON-ready: how masks were made, gravity's polar
+    angles and rolls, the depth distance, where the anchor's polar angle and distance came from).
     """
 
     poses: np.ndarray
     scores: np.ndarray
     ambiguous: np.ndarray
     seconds: float
+    details: dict[str, Any] = field(default_factory=dict)
 
 
 def draw_picks(pool: Sequence[int], samples: int, seed: int, pick_size: int = PICK_SIZE) -> list[list[int]]:
@@ -108,43 +109,31 @@ def to_zero123_radius(rel_sph: np.ndarray, anchor_distance: float, radius_scale:
     return rel_sph
 
 
-def relative_from_anchor_frame(poses: np.ndarray, anchor_polar: float, object_distance: float,
-                               radius_scale: float = ZERO123_RADIUS) -> np.ndarray:
-    """Inverse of ``cameras.anchor_frame_poses``: optical poses (N, 4, 4) in the anchor frame -> (N-1, 3).
-
-    The anchor is placed at ``(anchor_polar, 0, object_distance)`` looking at the object, the
-    cameras are carried into that frame, and their spherical coordinates give the relative poses.
-    """
-    poses = np.asarray(poses, dtype=np.float64)
-    world_from_anchor = opengl_to_optical(spherical_to_c2w(np.array([anchor_polar, 0.0, object_distance])))
-    centers_sph = c2w_to_spherical(world_from_anchor @ poses)
-    rel = relative(centers_sph[0], centers_sph[1:])
-    return to_zero123_radius(rel, object_distance, radius_scale)
+def world_cameras(poses: np.ndarray, anchor_c2w: np.ndarray) -> np.ndarray:
+    """Estimated cameras as OpenGL camera-to-world (N, 4, 4) in the object frame: ``poses`` (N, 4, 4), optical
+    frames in the anchor's optical frame (what the node publishes), placed by the anchor's true pose."""
+    anchor = opengl_to_optical(np.asarray(anchor_c2w, dtype=np.float64))
+    return opengl_to_optical(anchor @ np.asarray(poses, dtype=np.float64))
 
 
-def predicted_c2w(anchor_c2w: np.ndarray, pred_rel_sph: np.ndarray, radius_scale: float = ZERO123_RADIUS) -> np.ndarray:
-    """OpenGL camera-to-world (N, 4, 4) of the predicted cameras placed from the anchor's true pose."""
-    anchor_sph = c2w_to_spherical(anchor_c2w)
-    return spherical_to_c2w(apply_relative(anchor_sph, np.asarray(pred_rel_sph, dtype=np.float64), radius_scale))
-
-
-def score_pairs(pred_rel_sph: np.ndarray, true_c2w: np.ndarray, radius_scale: float = ZERO123_RADIUS
+def score_poses(poses: np.ndarray, true_c2w: np.ndarray, radius_scale: float = ZERO123_RADIUS
                 ) -> list[dict[str, object]]:
-    """Per target view: predicted and true relative poses and the paper's errors, JSON-ready.
+    """Per target view: predicted and true relative spherical poses and the paper's errors, JSON-ready.
 
-    ``pred_rel_sph`` (n-1, 3) anchor -> view i (i = 1..n-1); ``true_c2w`` (n, 4, 4) OpenGL
-    camera-to-world in the object frame, the anchor first.
+    ``poses`` (n, 4, 4): the estimate, camera k's optical frame in the anchor's (poses[0] = identity);
+    ``true_c2w`` (n, 4, 4) OpenGL camera-to-world in the object frame, the anchor first. The estimated
+    cameras are placed by the anchor's true pose, so the rotation error counts roll as well, and the
+    position error counts the estimate's metric scale (its object distance).
     """
-    pred_rel_sph = np.asarray(pred_rel_sph, dtype=np.float64).reshape(-1, 3)
     true_c2w = np.asarray(true_c2w, dtype=np.float64)
-    if len(true_c2w) != len(pred_rel_sph) + 1:
-        raise ValueError(f"{len(pred_rel_sph)} predicted poses for {len(true_c2w)} cameras (expected one fewer)")
-    anchor = true_c2w[0]
-    anchor_distance = float(c2w_to_spherical(anchor)[2])
-    true_rel = to_zero123_radius(relative_spherical(anchor[None], true_c2w[1:]), anchor_distance, radius_scale)
-    rot_err, pos_err = pair_errors(pred_rel_sph, np.broadcast_to(anchor, true_c2w[1:].shape), true_c2w[1:],
-                                   radius_scale)
+    if len(poses) != len(true_c2w):
+        raise ValueError(f"{len(poses)} estimated poses for {len(true_c2w)} cameras")
+    pred_c2w = world_cameras(poses, true_c2w[0])
+    anchor_distance = float(c2w_to_spherical(true_c2w[0])[2])
+    rel = [to_zero123_radius(relative_spherical(true_c2w[:1], c2w[1:]), anchor_distance, radius_scale)
+           for c2w in (pred_c2w, true_c2w)]
+    rot_err, pos_err = camera_errors(pred_c2w[1:], true_c2w[1:], anchor_distance)
     return [
         {"pred_rel_sph": pred.tolist(), "true_rel_sph": true.tolist(), "rot_err_deg": float(rot), "pos_err": float(pos)}
-        for pred, true, rot, pos in zip(pred_rel_sph, true_rel, rot_err, pos_err)
+        for pred, true, rot, pos in zip(*rel, rot_err, pos_err)
     ]

@@ -69,3 +69,23 @@ def with_roll(upright_poses: np.ndarray, rolls: np.ndarray) -> np.ndarray:
     turns[:, 3, 3] = 1.0
     turns[:, :3, :3] = np.stack([rz(float(roll)) for roll in rolls])
     return np.swapaxes(turns[:1], -1, -2) @ np.asarray(upright_poses, dtype=np.float64) @ turns
+
+
+class GravityUnavailable(ValueError):
+    """No gravity reading fits an image's stamp; the message says what was looked for."""
+
+
+def resting_acceleration(stamps: np.ndarray, accelerations: np.ndarray, stamp: int, window: int,
+                         tolerance: int) -> np.ndarray:
+    """Mean accelerometer reading (3,) over the ``window`` before ``stamp`` (a low-pass: the robot stands
+    still for the picture). Stamps are integer nanoseconds; ``stamps`` (M,), ``accelerations`` (M, 3).
+    GravityUnavailable when the newest reading at or before ``stamp`` (or just after, within
+    ``tolerance``) is more than ``tolerance`` away from it."""
+    stamps = np.asarray(stamps, dtype=np.int64)
+    near = np.abs(stamps - stamp) <= tolerance
+    if not near.any():
+        raise GravityUnavailable(f"no IMU reading within {tolerance * 1e-9:g} s of the image stamp "
+                                 f"{stamp * 1e-9:.3f} s")
+    chosen = (stamps >= stamp - window) & (stamps <= stamp) | near
+    return np.asarray(accelerations, dtype=np.float64)[chosen].mean(axis=0)
+

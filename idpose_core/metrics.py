@@ -34,12 +34,18 @@ def pair_errors(
     ``pred_rel_sph`` (..., 3) anchor -> target in Zero-1-to-3 units; ``anchor_c2w``, ``target_c2w``
     (..., 4, 4) true camera-to-world matrices with OpenGL camera axes (as the reference poses are).
     """
-    anchor_c2w = np.asarray(anchor_c2w, dtype=np.float64)
-    target_c2w = np.asarray(target_c2w, dtype=np.float64)
-    anchor_sph = c2w_to_spherical(anchor_c2w)
+    anchor_sph = c2w_to_spherical(np.asarray(anchor_c2w, dtype=np.float64))
     pred_c2w = spherical_to_c2w(apply_relative(anchor_sph, pred_rel_sph, radius_scale))
-    rot_err = rotation_angle_deg(target_c2w[..., :3, :3], pred_c2w[..., :3, :3])
-    pos_err = np.linalg.norm(pred_c2w[..., :3, 3] - target_c2w[..., :3, 3], axis=-1) / anchor_sph[..., 2]
+    return camera_errors(pred_c2w, target_c2w, anchor_sph[..., 2])
+
+
+def camera_errors(pred_c2w: np.ndarray, true_c2w: np.ndarray, anchor_distance: np.ndarray | float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation error in degrees, camera-centre error / ``anchor_distance``), each (...,), of estimated cameras
+    against true ones, both camera-to-world (..., 4, 4) with the same camera axes."""
+    pred_c2w, true_c2w = np.asarray(pred_c2w, dtype=np.float64), np.asarray(true_c2w, dtype=np.float64)
+    rot_err = rotation_angle_deg(true_c2w[..., :3, :3], pred_c2w[..., :3, :3])
+    pos_err = np.linalg.norm(pred_c2w[..., :3, 3] - true_c2w[..., :3, 3], axis=-1) / anchor_distance
     return rot_err, pos_err
 
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -23,7 +24,8 @@ from idpose_core.preprocessing import PreprocessedViews, bounding_box, preproces
 from idpose_core.solver import Progress, SolverConfig, SolverResult, estimate_poses
 from idpose_core.view_input import ViewInput
 
-__all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_view_poses", "views_mosaic"]
+__all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_view_poses", "result_details",
+           "views_mosaic"]
 
 MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
 LEVEL_POLAR_DEG = 90.0  # the anchor's polar angle when nothing tells it: a level camera
@@ -125,6 +127,14 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
                           anchor_polar_deg=polar_deg,
                           polar_source="gravity" if anchor.polar_deg is not None else "parameter",
                           object_distance=distance, distance_source="depth" if anchor.distance else "parameter")
+
+
+def result_details(result: PipelineResult) -> dict[str, Any]:
+    """What an estimate read off its views, JSON-ready: per view the mask method (and note), gravity's roll and
+    polar angle and the depth distance; where the anchor's polar angle and distance came from."""
+    return {"views": [asdict(view) for view in result.views], "anchor_polar_deg": result.anchor_polar_deg,
+            "polar_source": result.polar_source, "object_distance": result.object_distance,
+            "distance_source": result.distance_source}
 
 
 def views_mosaic(images: torch.Tensor) -> np.ndarray:

@@ -7,23 +7,35 @@ here) into ``idpose_core.transforms.TransformBuffer``. Glue only: no maths of it
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Imu
 from tqdm import tqdm
 
 from idpose_core.evaluation import match_stamps
-from idpose_core.transforms import TransformBuffer, TransformLookupError
+from idpose_core.gravity import GravityUnavailable, resting_acceleration, up_from_acceleration, up_from_orientation
+from idpose_core.transforms import TransformBuffer, TransformLookupError, quaternion_to_matrix
 from idpose_ros.bag_io import BagError, open_bag, topic_connections
-from msg_adapters import AdapterError, compressed_to_rgb, image_to_rgb, pose_to_matrix
+from idpose_ros.view_inputs import decode_image
+from msg_adapters import (
+    AdapterError,
+    imu_acceleration,
+    orientation_rotation,
+    pose_to_matrix,
+)
 
 IMAGE_TYPES = {"sensor_msgs/msg/Image": Image, "sensor_msgs/msg/CompressedImage": CompressedImage}
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+EXTRA_TYPES = {"depth": {"sensor_msgs/msg/Image": Image}, "mask": {"sensor_msgs/msg/Image": Image},
+               "camera_info": {"sensor_msgs/msg/CameraInfo": CameraInfo}}
+IMU_TYPE = "sensor_msgs/msg/Imu"
+GRAVITY_TYPES = {IMU_TYPE: Imu, POSE_TYPE: PoseStamped, "geometry_msgs/msg/QuaternionStamped": QuaternionStamped}
 
 
 def stamp_ns(stamp) -> int:
@@ -41,26 +53,58 @@ class ViewInfo:
 
 
 @dataclass(frozen=True)
+class ExtraTopics:
+    """A view's inputs besides its image, each matched to the image by stamp within ``tolerance`` s.
+
+    ``gravity_topic`` carries sensor_msgs/Imu (its acceleration averaged over the ``imu_window`` s
+    before the image, turned into the optical frame by ``imu_to_optical`` (x, y, z, w) or else by the
+    bag's transforms from the Imu's frame to the image's) or the camera's orientation in a frame whose
+    +z is up (geometry_msgs/PoseStamped or QuaternionStamped). A view that lacks a requested input is
+    skipped, with the reason.
+    """
+
+    depth_topic: str | None = None
+    mask_topic: str | None = None
+    camera_info_topic: str | None = None
+    gravity_topic: str | None = None
+    imu_to_optical: tuple[float, float, float, float] | None = None
+    tolerance: float = 0.02
+    imu_window: float = 0.1
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """Requested image-like inputs: kind -> topic."""
+        return {kind: topic for kind, topic in (("depth", self.depth_topic), ("mask", self.mask_topic),
+                                                ("camera_info", self.camera_info_topic)) if topic}
+
+
+@dataclass(frozen=True)
+class ViewSources:
+    """Where one view's other inputs are: per kind (depth, mask, camera_info) the index of the matched message
+    on its topic, and world up in the view's optical frame when a gravity topic was given."""
+
+    messages: dict[str, int] = field(default_factory=dict)
+    gravity_up: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class BagViews:
     """Every image on the topic (``views``), the ground truth of the usable ones and why others are skipped.
 
     ``world_from_camera[view_id]`` (4, 4) is the camera's optical frame in the world frame;
-    ``skipped[view_id]`` says why a view has no usable ground truth or image.
+    ``skipped[view_id]`` says why a view has no usable ground truth, image or requested input;
+    ``extras[view_id]`` where the view's other inputs are (``ExtraTopics``).
     """
 
     views: list[ViewInfo]
     world_from_camera: dict[int, np.ndarray]
     skipped: dict[int, str]
+    extras: dict[int, ViewSources] = field(default_factory=dict)  # usable view id -> its matched inputs
 
     @property
     def pool(self) -> list[int]:
         """The usable view ids, in capture order."""
         return sorted(self.world_from_camera)
-
-
-def decode_view(message: Image | CompressedImage) -> tuple[np.ndarray, np.ndarray | None]:
-    """(rgb (H, W, 3) uint8, alpha (H, W) uint8 | None) of an Image or CompressedImage, via msg_adapters."""
-    return (image_to_rgb if isinstance(message, Image) else compressed_to_rgb)(message)
 
 
 def _scan_images(reader, image_topic: str) -> tuple[list[ViewInfo], dict[int, str]]:
@@ -72,7 +116,7 @@ def _scan_images(reader, image_topic: str) -> tuple[list[ViewInfo], dict[int, st
     for view_id, (connection, _, raw) in enumerate(scan):
         message = deserialize_message(raw, IMAGE_TYPES[connection.msgtype])
         try:
-            decode_view(message)
+            decode_image(message)
         except AdapterError as err:
             broken[view_id] = f"bad image: {err}"
         views.append(ViewInfo(view_id, stamp_ns(message.header.stamp), message.header.frame_id.lstrip("/")))
@@ -95,9 +139,8 @@ def _transform_buffer(reader) -> TransformBuffer:
     return buffer
 
 
-def _ground_truth_from_tf(reader, views: list[ViewInfo], world_frame: str
+def _ground_truth_from_tf(buffer: TransformBuffer, views: list[ViewInfo], world_frame: str
                           ) -> tuple[dict[int, np.ndarray], dict[int, str]]:
-    buffer = _transform_buffer(reader)
     if not buffer.frames:
         raise BagError("the bag has no transforms on /tf or /tf_static; give the ground truth with --gt-topic")
     poses, skipped = {}, {}
@@ -129,34 +172,131 @@ def _ground_truth_from_topic(reader, views: list[ViewInfo], topic: str, world_fr
     return poses, skipped
 
 
-def read_bag_views(path: str | Path, image_topic: str, world_frame: str = "world", gt_topic: str | None = None,
-                   gt_tolerance: float = 0.01) -> BagViews:
-    """The views of ``image_topic`` and their ground truth from /tf (default) or the PoseStamped ``gt_topic``.
+def _read(reader, topic: str, types: dict[str, type]) -> Iterator[tuple[int, object]]:
+    """(header stamp, message) of every message on ``topic``, which must carry one of ``types``, one at a time."""
+    for connection, _, raw in reader.messages(connections=topic_connections(reader, topic, tuple(types))):
+        message = deserialize_message(raw, types[connection.msgtype])
+        yield stamp_ns(message.header.stamp), message
 
-    A view without ground truth (or whose image does not decode) is kept in ``skipped`` with the
-    reason. ``gt_tolerance`` (s) bounds the stamp difference when matching ``gt_topic`` poses.
+
+def _gravity(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: TransformBuffer
+             ) -> tuple[dict[int, np.ndarray], dict[int, str]]:
+    """World up in each view's optical frame from ``extras.gravity_topic``, or why a view has none."""
+    readings = list(_read(reader, extras.gravity_topic, GRAVITY_TYPES))
+    tolerance, window = int(round(extras.tolerance * 1e9)), int(round(extras.imu_window * 1e9))
+    ups, missing = {}, {}
+    if readings and isinstance(readings[0][1], Imu):
+        stamps = np.array([stamp for stamp, _ in readings])
+        try:
+            accelerations = np.stack([imu_acceleration(message) for _, message in readings])
+        except AdapterError as err:
+            raise BagError(f"{extras.gravity_topic}: {err}") from None
+        imu_frame = readings[0][1].header.frame_id.lstrip("/")
+        for view in views:
+            try:
+                a = resting_acceleration(stamps, accelerations, view.stamp, window, tolerance)
+                if extras.imu_to_optical is not None:
+                    optical_from_imu = quaternion_to_matrix(np.asarray(extras.imu_to_optical))
+                else:
+                    optical_from_imu = buffer.lookup(view.frame_id, imu_frame, view.stamp)[:3, :3]
+                ups[view.view_id] = up_from_acceleration(a, optical_from_imu)
+            except (GravityUnavailable, TransformLookupError) as err:
+                missing[view.view_id] = f"no gravity: {err}"
+        return ups, missing
+    matches = match_stamps([view.stamp for view in views], [stamp for stamp, _ in readings], tolerance)
+    for view, index in zip(views, matches):
+        if index < 0:
+            missing[view.view_id] = (f"no gravity: no {extras.gravity_topic} orientation within "
+                                     f"{extras.tolerance:g} s of the image stamp")
+            continue
+        try:
+            ups[view.view_id] = up_from_orientation(orientation_rotation(readings[index][1]))
+        except AdapterError as err:
+            missing[view.view_id] = f"no gravity: {err}"
+    return ups, missing
+
+
+def _sources(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: TransformBuffer
+             ) -> tuple[dict[int, ViewSources], dict[int, str]]:
+    """Each view's matched inputs (``ExtraTopics``), or why one is missing."""
+    tolerance = int(round(extras.tolerance * 1e9))
+    matched: dict[int, dict[str, int]] = {view.view_id: {} for view in views}
+    missing: dict[int, str] = {}
+    for kind, topic in extras.topics.items():
+        stamps = [stamp for stamp, _ in _read(reader, topic, EXTRA_TYPES[kind])]
+        for view, index in zip(views, match_stamps([view.stamp for view in views], stamps, tolerance)):
+            if index < 0:
+                missing.setdefault(view.view_id, f"no {kind}: nothing on {topic} within {extras.tolerance:g} s of "
+                                                 f"the image stamp {view.stamp * 1e-9:.3f} s")
+            matched[view.view_id][kind] = int(index)
+    ups = {}
+    if extras.gravity_topic:
+        ups, no_gravity = _gravity(reader, views, extras, buffer)
+        for view_id, reason in no_gravity.items():
+            missing.setdefault(view_id, reason)
+    return {view_id: ViewSources(kinds, ups.get(view_id)) for view_id, kinds in matched.items()
+            if view_id not in missing}, missing
+
+
+def read_bag_views(path: str | Path, image_topic: str, world_frame: str = "world", gt_topic: str | None = None,
+                   gt_tolerance: float = 0.01, extras: ExtraTopics = ExtraTopics()) -> BagViews:
+    """The views of ``image_topic``, their ground truth from /tf (default) or the PoseStamped ``gt_topic``, and
+    where their other inputs are (``extras``).
+
+    A view without ground truth, whose image does not decode, or that lacks a requested input is kept
+    in ``skipped`` with the reason. ``gt_tolerance`` (s) bounds the stamp difference when matching
+    ``gt_topic`` poses.
     """
     world_frame = world_frame.lstrip("/")
     with open_bag(path) as reader:
         views, broken = _scan_images(reader, image_topic)
+        needs_tf = gt_topic is None or (extras.gravity_topic and extras.imu_to_optical is None)
+        buffer = _transform_buffer(reader) if needs_tf else TransformBuffer()
         if gt_topic is None:
-            poses, skipped = _ground_truth_from_tf(reader, views, world_frame)
+            poses, skipped = _ground_truth_from_tf(buffer, views, world_frame)
         else:
             poses, skipped = _ground_truth_from_topic(reader, views, gt_topic, world_frame,
                                                       int(round(gt_tolerance * 1e9)))
-    for view_id, reason in broken.items():
+        sources, missing = _sources(reader, views, extras, buffer)
+    for view_id, reason in {**missing, **broken}.items():
         poses.pop(view_id, None)
         skipped[view_id] = reason
-    return BagViews(views=views, world_from_camera=poses, skipped=dict(sorted(skipped.items())))
+    return BagViews(views=views, world_from_camera=poses, skipped=dict(sorted(skipped.items())),
+                    extras={view_id: sources[view_id] for view_id in poses})
 
 
-def load_view_messages(path: str | Path, image_topic: str, view_ids: set[int]
-                       ) -> dict[int, Image | CompressedImage]:
-    """The image messages of the chosen views, read again from the bag (decode with ``decode_view``)."""
-    messages = {}
+@dataclass(frozen=True)
+class ViewMessages:
+    """One view as recorded: its image message and the matched depth, mask and CameraInfo messages (None where
+    not requested), and world up in its optical frame (None without a gravity topic)."""
+
+    image: Image | CompressedImage
+    depth: Image | None = None
+    mask: Image | None = None
+    camera_info: CameraInfo | None = None
+    gravity_up: np.ndarray | None = None
+
+
+def load_view_messages(path: str | Path, image_topic: str, view_ids: set[int], bag: BagViews | None = None,
+                       extras: ExtraTopics = ExtraTopics()) -> dict[int, ViewMessages]:
+    """The chosen views' messages, read again from the bag (their other inputs as ``bag.extras`` matched them)."""
+    messages: dict[int, ViewMessages] = {}
+    wanted: dict[str, dict[int, list[int]]] = {kind: {} for kind in extras.topics}  # kind -> message -> views
+    for kind in wanted:
+        for view_id in view_ids:
+            wanted[kind].setdefault(bag.extras[view_id].messages[kind], []).append(view_id)
     with open_bag(path) as reader:
         connections = topic_connections(reader, image_topic, tuple(IMAGE_TYPES))
         for view_id, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
             if view_id in view_ids:
-                messages[view_id] = deserialize_message(raw, IMAGE_TYPES[connection.msgtype])
+                gravity = bag.extras[view_id].gravity_up if bag and view_id in bag.extras else None
+                messages[view_id] = ViewMessages(deserialize_message(raw, IMAGE_TYPES[connection.msgtype]),
+                                                 gravity_up=gravity)
+        for kind, topic in extras.topics.items():
+            types = EXTRA_TYPES[kind]
+            for index, (connection, _, raw) in enumerate(
+                    reader.messages(connections=topic_connections(reader, topic, tuple(types)))):
+                for view_id in wanted[kind].get(index, ()):
+                    messages[view_id] = replace(messages[view_id],
+                                                **{kind: deserialize_message(raw, types[connection.msgtype])})
     return messages

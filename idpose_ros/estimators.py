@@ -13,25 +13,25 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-from sensor_msgs.msg import CompressedImage, Image
 
 from idpose_core.evaluation import ViewSetEstimate
 from idpose_core.model_loading import PRECISIONS, load_predictor
-from idpose_core.pipeline import ViewInput, estimate_view_poses
+from idpose_core.pipeline import estimate_view_poses, result_details
 from idpose_core.predictor import NoisePredictor
 from idpose_core.solver import Progress, SolverConfig
-from idpose_ros.bag_views import decode_view
+from idpose_ros.bag_views import ViewMessages
 from idpose_ros.parameters import SOLVER_PARAMETERS, parameter_table, pipeline_settings, solver_config
 from idpose_ros.replay import ReplayEstimator
+from idpose_ros.view_inputs import view_input
 
-ImageMessage = Image | CompressedImage
 NODE_BOUNDS = {name: spec["bounds"] for name, _, spec in parameter_table()}
 DEFAULT_IMAGE_SIZE = next(default for name, default, _ in parameter_table() if name == "image_size")
 MODES = ("offline", "replay")
 
 
 class ViewSetEstimator(Protocol):
-    """Estimates the poses of n views (the first is the anchor) given the anchor's polar angle and distance.
+    """Estimates the poses of n views (the first is the anchor) given the anchor's polar angle and distance
+    (a view's gravity and the anchor's depth, when given, take precedence).
 
     ``values`` are the node parameters it runs on; ``description`` says what estimates (mode, model,
     node); ``close()`` releases what it holds (a node, a ROS context).
@@ -40,7 +40,7 @@ class ViewSetEstimator(Protocol):
     values: dict[str, Any]
     description: dict[str, Any]
 
-    def __call__(self, messages: Sequence[ImageMessage], anchor_polar_deg: float, object_distance: float,
+    def __call__(self, views: Sequence[ViewMessages], anchor_polar_deg: float, object_distance: float,
                  progress: Progress | None = None) -> ViewSetEstimate: ...
 
     def close(self) -> None: ...
@@ -125,16 +125,16 @@ class OfflineEstimator:
         self.description = {"mode": "offline", "model": model or {"predictor": type(predictor).__name__},
                             "solver_preset": preset}
 
-    def __call__(self, messages: Sequence[ImageMessage], anchor_polar_deg: float, object_distance: float,
+    def __call__(self, views: Sequence[ViewMessages], anchor_polar_deg: float, object_distance: float,
                  progress: Progress | None = None) -> ViewSetEstimate:
-        views = [ViewInput(*decode_view(message)) for message in messages]
+        inputs = [view_input(view.image, view.depth, view.mask, view.camera_info, view.gravity_up) for view in views]
         settings = pipeline_settings({**self.values, "anchor_polar_deg": anchor_polar_deg,
                                       "object_distance": object_distance})
         start = time.perf_counter()
-        result = estimate_view_poses(self.predictor, views, settings, progress=progress)
+        result = estimate_view_poses(self.predictor, inputs, settings, progress=progress)
         solved = result.solver_result
         return ViewSetEstimate(result.poses, np.asarray(solved.scores), np.asarray(solved.ambiguous),
-                               time.perf_counter() - start)
+                               time.perf_counter() - start, result_details(result))
 
     def close(self) -> None:
         """Nothing to release: the model goes with the object."""

@@ -30,19 +30,17 @@ from idpose_core.evaluation import (
     VIEW_COUNTS,
     draw_picks,
     object_frame_c2w,
-    predicted_c2w,
-    relative_from_anchor_frame,
-    score_pairs,
+    score_poses,
+    world_cameras,
 )
 from idpose_core.metrics import aggregate, random_pose_errors
 from idpose_core.solver import Progress
 from idpose_core.zero123 import ModelLoadError
 from idpose_ros.bag_io import BagError
 from idpose_ros.bag_report import write_report
-from idpose_ros.bag_views import BagViews, load_view_messages, read_bag_views
+from idpose_ros.bag_views import BagViews, ExtraTopics, ViewMessages, load_view_messages, read_bag_views
 from idpose_ros.estimators import (
     NODE_BOUNDS,
-    ImageMessage,
     ViewSetEstimator,
     add_estimator_arguments,
     estimator_options,
@@ -57,7 +55,7 @@ RANDOM_DRAWS = 200  # random-pose guesses per scored pair: the baseline row of t
 class GroundTruthOptions:
     """Where a bag's views and their true camera poses are: the image topic, and /tf from ``world_frame``
     (or the PoseStamped ``gt_topic`` matched within ``gt_tolerance`` s); the object's centre and the
-    world's up axis in the world frame."""
+    world's up axis in the world frame; the views' other inputs (depth, mask, intrinsics, gravity)."""
 
     image_topic: str = "/camera/image_raw"
     world_frame: str = "world"
@@ -65,6 +63,7 @@ class GroundTruthOptions:
     gt_tolerance: float = 0.01
     object_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    extras: ExtraTopics = ExtraTopics()
 
     @property
     def description(self) -> str:
@@ -173,20 +172,19 @@ def plan_tasks(views: BagViews, ground_truth: GroundTruthOptions, protocol: Eval
     return tasks
 
 
-def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, messages: Sequence[ImageMessage],
+def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, views: Sequence[ViewMessages],
                  progress: Progress | None = None) -> EstimateOutcome:
-    """Estimate the task's views (``messages``: its first n images, anchor first) and score them."""
+    """Estimate the task's views (its first n, anchor first) and score them against the truth."""
     true_c2w = task.true_c2w[:task.n]
     anchor_polar_deg, distance = anchor_geometry(true_c2w)
-    estimate = estimator(messages, anchor_polar_deg, distance, progress)
-    rel = relative_from_anchor_frame(estimate.poses, math.radians(anchor_polar_deg), distance)
+    estimate = estimator(views, anchor_polar_deg, distance, progress)
     records = [{"sample": task.sample, "n": task.n, "anchor_view": task.pick[0], "view": target, **record,
                 "score": float(score), "ambiguous": bool(ambiguous), "seconds": estimate.seconds}
-               for target, record, score, ambiguous in zip(task.pick[1:task.n], score_pairs(rel, true_c2w),
+               for target, record, score, ambiguous in zip(task.pick[1:task.n], score_poses(estimate.poses, true_c2w),
                                                            estimate.scores, estimate.ambiguous)]
     row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "seconds": estimate.seconds,
-           "anchor_polar_deg": anchor_polar_deg, "object_distance": distance}
-    predicted = np.concatenate([true_c2w[:1], predicted_c2w(true_c2w[0], [r["pred_rel_sph"] for r in records])])
+           "anchor_polar_deg": anchor_polar_deg, "object_distance": distance, "details": estimate.details}
+    predicted = world_cameras(estimate.poses, true_c2w[0])
     return EstimateOutcome(records, random_baseline(true_c2w, (task.seed, task.index, task.n)), row, predicted)
 
 
@@ -201,7 +199,7 @@ def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str,
 def read_views(bag: Path, ground_truth: GroundTruthOptions) -> BagViews:
     """The bag's views with their ground truth; BagError for an unreadable bag or a missing topic."""
     gt = ground_truth
-    return read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance)
+    return read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance, gt.extras)
 
 
 def require_usable(views: BagViews, image_topic: str) -> None:
@@ -229,7 +227,7 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
                         estimator={**estimator.description, "node_parameters": estimator.values}, views=views,
                         picks=list({task.sample: list(task.pick) for task in tasks}.values()),
                         view_counts=sorted({task.n for task in tasks}))
-    messages = load_view_messages(bag, gt.image_topic, {v for task in tasks for v in task.pick})
+    messages = load_view_messages(bag, gt.image_topic, {v for task in tasks for v in task.pick}, views, gt.extras)
     with tqdm(total=len(tasks), desc="estimating", unit="set", file=sys.stderr, disable=not show_progress) as bar:
         for task in tasks:
             label = f"sample {task.sample}, {task.n} views"
@@ -259,12 +257,26 @@ def add_ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
                        help="object centre in the world frame (default origin)")
     group.add_argument("--up", type=float, nargs=3, default=(0.0, 0.0, 1.0), metavar=("X", "Y", "Z"),
                        help="world up axis (default +z)")
+    group = parser.add_argument_group("the views' other inputs (each matched to the image by stamp)")
+    group.add_argument("--depth-topic", default=None,
+                       help="aligned depth Image (16UC1 mm or 32FC1 m): segments the object, gives its distance")
+    group.add_argument("--camera-info-topic", default=None, help="CameraInfo of the colour camera (needed by depth)")
+    group.add_argument("--mask-topic", default=None, help="object masks (mono8) from a segmentation node")
+    group.add_argument("--gravity-topic", default=None,
+                       help="sensor_msgs/Imu, or the optical frame's orientation in a z-up frame "
+                            "(PoseStamped or QuaternionStamped): each view's roll and elevation")
+    group.add_argument("--imu-to-optical", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "W"),
+                       help="rotation from the Imu frame to the optical frame (default: from the bag's transforms)")
+    group.add_argument("--input-tolerance", type=float, default=0.02,
+                       help="stamp tolerance for these inputs (s, default 0.02)")
 
 
 def ground_truth_options(args: argparse.Namespace) -> GroundTruthOptions:
     """The options ``add_ground_truth_arguments`` parsed."""
+    extras = ExtraTopics(args.depth_topic, args.mask_topic, args.camera_info_topic, args.gravity_topic,
+                         tuple(args.imu_to_optical) if args.imu_to_optical else None, args.input_tolerance)
     return GroundTruthOptions(args.image_topic, args.world_frame, args.gt_topic, args.gt_tolerance,
-                              tuple(args.object_center), tuple(args.up))
+                              tuple(args.object_center), tuple(args.up), extras)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

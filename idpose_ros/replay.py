@@ -30,6 +30,7 @@ from std_srvs.srv import Trigger
 
 from idpose_core.evaluation import PICK_SIZE, ViewSetEstimate
 from idpose_core.solver import Progress
+from idpose_ros.bag_views import ViewMessages
 from idpose_ros.diagnostics import STATUS_NAME
 from idpose_ros.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
 from msg_adapters import pose_to_matrix
@@ -184,8 +185,9 @@ class ReplayEstimator:
                           f"{response.message}")
 
     # ----- one view set ---------------------------------------------------------------------------------------------
-    def __call__(self, messages: Sequence[Image | CompressedImage], anchor_polar_deg: float, object_distance: float,
+    def __call__(self, views: Sequence[ViewMessages], anchor_polar_deg: float, object_distance: float,
                  progress: Progress | None = None) -> ViewSetEstimate:
+        messages = [view.image for view in views]
         self._set_parameters({**self.values, "anchor_polar_deg": float(anchor_polar_deg),
                               "object_distance": float(object_distance), "capture_mode": "on_request",
                               "views_per_estimate": 0, "max_views": PICK_SIZE, "anchor_frame": ""})

@@ -1,26 +1,35 @@
-"""ROS messages <-> numpy: images, compressed images, poses, pose arrays and RViz markers.
+"""ROS messages <-> numpy: images, depth and masks, compressed images, poses, pose arrays, RViz markers, and
+what sensors say about a view (intrinsics, gravity, orientation).
 
 Imports numpy, OpenCV and the ROS message packages only (no torch, no idpose_core), so the
 node's message handling can be tested and reused without a model.
 """
 
 from msg_adapters.compressed import compressed_to_rgb
+from msg_adapters.depth import depth_to_image, image_to_depth, image_to_mask
 from msg_adapters.encodings import Encoding, lookup_encoding
 from msg_adapters.errors import AdapterError
 from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
 from msg_adapters.markers import camera_markers
 from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_array
+from msg_adapters.sensors import camera_info_intrinsics, imu_acceleration, orientation_rotation
 
 __all__ = [
     "AdapterError",
     "Encoding",
     "array_to_image",
+    "camera_info_intrinsics",
     "camera_markers",
     "compressed_to_rgb",
+    "depth_to_image",
     "image_to_array",
+    "image_to_depth",
+    "image_to_mask",
     "image_to_rgb",
+    "imu_acceleration",
     "lookup_encoding",
     "matrix_to_pose",
+    "orientation_rotation",
     "pose_to_matrix",
     "poses_to_pose_array",
 ]

@@ -18,7 +18,7 @@ from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
 from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_core.transforms import rigid_transform
 from idpose_ros.bag_io import BagError, BagWriter
-from idpose_ros.bag_views import decode_view, load_view_messages, read_bag_views
+from idpose_ros.bag_views import load_view_messages, read_bag_views
 from idpose_ros.make_synthetic_bag import (
     IMAGE_TOPIC,
     PERIOD_NS,
@@ -29,6 +29,7 @@ from idpose_ros.make_synthetic_bag import (
     write_rgba_image,
     write_tf,
 )
+from idpose_ros.view_inputs import decode_image
 
 SECOND = 1_000_000_000
 
@@ -77,7 +78,7 @@ def test_images_decode_with_the_mask_in_alpha(tiny_bag):
     path, _, _ = tiny_bag
     messages = load_view_messages(path, IMAGE_TOPIC, {0, 2})
     assert sorted(messages) == [0, 2]
-    rgb, alpha = decode_view(messages[2])
+    rgb, alpha = decode_image(messages[2].image)
     assert rgb.shape == (32, 32, 3) and alpha.shape == (32, 32)
     assert set(np.unique(alpha)) == {0, 255}
     assert np.all(rgb[alpha == 0] == 255)  # white background
@@ -165,7 +166,7 @@ def test_compressed_images_and_undecodable_ones(tmp_path):
             bag.write("/img/compressed", "sensor_msgs/msg/CompressedImage", stamp, serialize_message(message))
     bag = read_bag_views(path, "/img/compressed")
     assert bag.pool == [0] and "bad image" in bag.skipped[1]
-    rgb, alpha = decode_view(load_view_messages(path, "/img/compressed", {0})[0])
+    rgb, alpha = decode_image(load_view_messages(path, "/img/compressed", {0})[0].image)
     assert rgb.shape == (6, 8, 3) and np.all(rgb[..., 2] == 255) and alpha.sum() == 6 * 255
 
 
@@ -212,5 +213,5 @@ def test_the_shipped_demo_bags(name):
     expected = expected_optical_poses(0, 12)
     for view_id in bag.pool:
         np.testing.assert_allclose(bag.world_from_camera[view_id], expected[view_id], atol=1e-9)
-    rgb, alpha = decode_view(load_view_messages(path, IMAGE_TOPIC, {0})[0])
+    rgb, alpha = decode_image(load_view_messages(path, IMAGE_TOPIC, {0})[0].image)
     assert rgb.shape == (256, 256, 3) and alpha.max() == 255

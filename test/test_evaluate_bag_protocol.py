@@ -9,11 +9,12 @@ from idpose_core.evaluation import (
     draw_picks,
     match_stamps,
     object_frame_c2w,
-    predicted_c2w,
-    relative_from_anchor_frame,
-    score_pairs,
+    score_poses,
+    world_cameras,
     world_to_object,
 )
+from idpose_core.gravity import with_roll
+from idpose_core.synthetic.scenes import rolled_optical_frames
 from idpose_core.transforms import invert_transform
 
 
@@ -65,24 +66,33 @@ def test_true_cameras_in_a_tilted_world_score_perfectly_with_their_own_poses():
     np.testing.assert_allclose(recovered, c2w, atol=1e-12)
 
     true_rel = np.array([[0.7 - 1.2, 2.0 - 0.4, 0.5 * 1.85 / 2.0], [2.3 - 1.2, 5.5 - 0.4, -0.2 * 1.85 / 2.0]])
-    records = score_pairs(true_rel, recovered)
+    poses = anchor_frame_poses(true_rel, anchor_polar=1.2, object_distance=2.0)  # as the node publishes them
+    records = score_poses(poses, recovered)
     for record, expected in zip(records, true_rel):
         np.testing.assert_allclose(record["true_rel_sph"], expected, atol=1e-12)
+        np.testing.assert_allclose(record["pred_rel_sph"], expected, atol=1e-9)
         assert record["rot_err_deg"] == pytest.approx(0.0, abs=1e-5)
         assert record["pos_err"] == pytest.approx(0.0, abs=1e-9)
-    np.testing.assert_allclose(predicted_c2w(c2w[0], true_rel), c2w[1:], atol=1e-9)
+    np.testing.assert_allclose(world_cameras(poses, c2w[0]), c2w, atol=1e-9)
 
 
 def test_a_wrong_azimuth_costs_its_angle():
-    c2w = spherical_to_c2w(np.array([[math.pi / 2, 0.0, 2.0], [math.pi / 2, 1.0, 2.0]]))
-    (record,) = score_pairs(np.array([[0.0, 1.0 + math.radians(20), 0.0]]), c2w)
+    sph = np.array([[math.pi / 2, 0.0, 2.0], [math.pi / 2, 1.0, 2.0]])
+    poses = anchor_frame_poses(np.array([[0.0, 1.0 + math.radians(20), 0.0]]), math.pi / 2, 2.0)
+    (record,) = score_poses(poses, spherical_to_c2w(sph))
     assert record["rot_err_deg"] == pytest.approx(20.0, abs=1e-6)
     assert record["pos_err"] == pytest.approx(2 * math.sin(math.radians(10)), abs=1e-9)  # chord / radius
-    with pytest.raises(ValueError, match="one fewer"):
-        score_pairs(np.zeros((2, 3)), c2w)
+    with pytest.raises(ValueError, match="3 estimated poses for 2 cameras"):
+        score_poses(np.stack([np.eye(4)] * 3), spherical_to_c2w(sph))
 
 
-def test_relative_from_anchor_frame_inverts_anchor_frame_poses():
-    rel = np.array([[0.3, 1.0, 0.1], [-0.5, 4.0, -0.2], [0.0, 2.5, 0.0]])
-    poses = anchor_frame_poses(rel, anchor_polar=1.1, object_distance=1.7)
-    np.testing.assert_allclose(relative_from_anchor_frame(poses, 1.1, 1.7), rel, atol=1e-9)
+def test_rolled_cameras_score_by_their_real_frames():
+    """Poses with each view's roll put back score zero; the upright poses are off by the roll difference."""
+    sph = np.array([[1.1, 0.3, 2.0], [0.8, 1.9, 2.0]])
+    rolls = np.radians([20.0, -35.0])
+    true_c2w = opengl_to_optical(rolled_optical_frames(sph, rolls))
+    upright = anchor_frame_poses(sph[1:] - sph[:1], anchor_polar=1.1, object_distance=2.0)
+    (exact,) = score_poses(with_roll(upright, rolls), true_c2w)
+    assert exact["rot_err_deg"] == pytest.approx(0.0, abs=1e-5) and exact["pos_err"] == pytest.approx(0.0, abs=1e-9)
+    (unrolled,) = score_poses(upright, true_c2w)
+    assert unrolled["rot_err_deg"] > 30.0 and unrolled["pos_err"] > 0.3

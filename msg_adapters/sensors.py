@@ -1,0 +1,34 @@
+"""What the robot knows about a view, from its messages: intrinsics (CameraInfo), gravity (Imu), orientation."""
+import numpy as np
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
+from sensor_msgs.msg import CameraInfo, Imu
+
+from msg_adapters.errors import AdapterError
+from msg_adapters.quaternions import quaternion_to_rotation
+
+
+def camera_info_intrinsics(msg: CameraInfo) -> np.ndarray:
+    """K (3, 3) of a CameraInfo; AdapterError when it is unset (all zeros) or not a camera matrix."""
+    k = np.asarray(msg.k, dtype=np.float64).reshape(3, 3)
+    if not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0 or k[2, 2] != 1.0:
+        raise AdapterError("CameraInfo.k is not a camera matrix (positive focal lengths, k[8] = 1): "
+                           f"{k.ravel().tolist()}")
+    return k
+
+
+def imu_acceleration(msg: Imu) -> np.ndarray:
+    """linear_acceleration (3,) in the Imu's frame (m/s^2); AdapterError when not finite or zero."""
+    a = msg.linear_acceleration
+    vector = np.array([a.x, a.y, a.z], dtype=np.float64)
+    if not np.all(np.isfinite(vector)) or np.linalg.norm(vector) < 1e-6:
+        raise AdapterError(f"Imu.linear_acceleration has no direction: {vector.tolist()}")
+    return vector
+
+
+def orientation_rotation(msg: PoseStamped | QuaternionStamped) -> np.ndarray:
+    """The rotation (3, 3) of a PoseStamped's or QuaternionStamped's orientation (position ignored)."""
+    q = msg.pose.orientation if isinstance(msg, PoseStamped) else msg.quaternion
+    quaternion = np.array([q.x, q.y, q.z, q.w], dtype=np.float64)
+    if not np.all(np.isfinite(quaternion)) or np.linalg.norm(quaternion) < 1e-12:
+        raise AdapterError(f"orientation {quaternion.tolist()} is not a rotation (x, y, z, w)")
+    return quaternion_to_rotation(quaternion)
