@@ -131,10 +131,14 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
 
 def result_details(result: PipelineResult) -> dict[str, Any]:
     """What an estimate read off its views, JSON-ready: per view the mask method (and note), gravity's roll and
-    polar angle and the depth distance; where the anchor's polar angle and distance came from."""
+    polar angle and the depth distance; where the anchor's polar angle and distance came from; the
+    predictor samples it took (evaluated, differentiated, and both per solver stage)."""
+    solved = result.solver_result
     return {"views": [asdict(view) for view in result.views], "anchor_polar_deg": result.anchor_polar_deg,
             "polar_source": result.polar_source, "object_distance": result.object_distance,
-            "distance_source": result.distance_source}
+            "distance_source": result.distance_source, "forward_samples": solved.forward_samples,
+            "backward_samples": solved.backward_samples,
+            "stage_samples": {stage: list(counts) for stage, counts in solved.stage_samples.items()}}
 
 
 def views_mosaic(images: torch.Tensor) -> np.ndarray:
