@@ -142,9 +142,10 @@ def main() -> None:
           "| masks | s / estimate |\n|---|---|---|---|---|---|---|---|---|")
     for name, run in pose_runs.items():
         model, random = run["aggregates"]["all"], run["random"]["all"]
+        methods = ", ".join(f"{method} {count}" for method, count in run["mask_methods"].items())
         print(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | {100 * model['rot_acc_30']:.1f} | "
-              f"{model['mean_rot_err_deg']:.1f} | {100 * model['pos_acc_0.2']:.1f} | {100 * random['rot_acc_30']:.1f} | "
-              f"{', '.join(f'{m} {c}' for m, c in run['mask_methods'].items())} | {run['seconds_per_estimate']:.1f} |")
+              f"{model['mean_rot_err_deg']:.1f} | {100 * model['pos_acc_0.2']:.1f} | "
+              f"{100 * random['rot_acc_30']:.1f} | {methods} | {run['seconds_per_estimate']:.1f} |")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {args.out} ({result['minutes']:.0f} min)")
