@@ -5,7 +5,8 @@ Renders fresh bags of the six demo objects with ``make_synthetic_bag`` (camera s
 used in training): once with every camera rolled by up to ``--roll-deg`` about its optical axis, once
 upright (the same cameras otherwise). Each is evaluated with ``evaluate_bag`` (embedded demo model,
 ``--preset``, ``--n``) without gravity and with the bag's Imu (``/camera/imu``, mounted with
-camera_link's axes: the extrinsic comes from the bag's transforms). Then one object under the
+camera_link's axes: the extrinsic comes from the bag's transforms), the gravity polar angles kept
+fixed or only used to start from (``known_polar``). Then one object under the
 ``default`` and ``fast`` presets, with and without gravity, for the solver's sample counters and the
 seconds per estimate. Prints the tables and writes bench/results/gravity.json.
 
@@ -36,6 +37,9 @@ from idpose_ros.make_synthetic_bag import IMU_TOPIC, make_bag  # noqa: E402
 OUT = ROOT / "bench" / "results" / "gravity.json"
 WITH_GRAVITY = GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
 WITHOUT = GroundTruthOptions()
+# (cameras, gravity) conditions of the accuracy runs: bag roll, ground-truth options, solver overrides
+CONDITIONS = {"without gravity": (WITHOUT, ()), "with gravity": (WITH_GRAVITY, ()),
+              "with gravity, polar refined": (WITH_GRAVITY, ("known_polar=start",))}
 
 
 def cost(evaluations: list) -> dict[int, dict[str, float]]:
@@ -53,17 +57,20 @@ def cost(evaluations: list) -> dict[int, dict[str, float]]:
 
 
 def accuracy(args: argparse.Namespace, work: Path) -> dict:
-    """Rolled and upright bags of every demo object, each evaluated without and with gravity."""
-    estimator = make_estimator(EstimatorOptions(preset=args.preset))
+    """Rolled and upright bags of every demo object, each evaluated without gravity, with it (polar angles kept)
+    and with it as a start only (refinement moves the polar angles)."""
+    estimators = {overrides: make_estimator(EstimatorOptions(preset=args.preset, solver_params=overrides))
+                  for _, overrides in CONDITIONS.values()}
     protocol = EvaluationProtocol(args.samples, args.seed, tuple(args.n))
     runs: dict[str, list] = {}
     for spec in demo_objects():
         for cameras, roll in (("rolled", args.roll_deg), ("upright", 0.0)):
             bag = make_bag(work / f"{cameras}_{spec.name}", "mcap", "demo", spec.name, args.views, args.seed,
                            roll_deg=roll)
-            for gravity, options in (("without gravity", WITHOUT), ("with gravity", WITH_GRAVITY)):
+            for gravity, (options, overrides) in CONDITIONS.items():
                 print(f"{spec.name}, {cameras} cameras, {gravity}", flush=True)
-                runs.setdefault(f"{cameras}, {gravity}", []).append(evaluate_bag(bag, estimator, options, protocol))
+                runs.setdefault(f"{cameras}, {gravity}", []).append(
+                    evaluate_bag(bag, estimators[overrides], options, protocol))
     return {name: {"aggregates": aggregate([r for e in evaluations for r in e.records]),
                    "random": aggregate([r for e in evaluations for r in e.random_records]),
                    "cost": cost(evaluations)} for name, evaluations in runs.items()}

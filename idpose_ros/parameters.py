@@ -82,6 +82,8 @@ SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
     "grad_batch": _spec("samples differentiated in one backward pass (activation memory grows with it: "
                         "about 0.45 GB per sample for full-size Zero-1-to-3 in float32)", bounds=(1, 4096)),
     "seed": _spec("random seed of the solver's noise", bounds=(0, INT32_MAX)),
+    "known_polar": _spec("views whose polar angle gravity gives: search azimuth only and keep that angle (fixed) "
+                         "or let refinement move it (start)", choices=("fixed", "start")),
 }
 
 
