@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -13,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interacti
 import numpy as np  # noqa: E402
 
 from idpose_core.metrics import aggregate  # noqa: E402
+from idpose_ros.bag_views import ExtraTopics  # noqa: E402
 
 if TYPE_CHECKING:
     from idpose_ros.evaluate_bag import BagEvaluation
@@ -55,6 +57,28 @@ def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, fl
     return model, {"guesses": guesses, **random}
 
 
+def inputs_used(run: BagEvaluation) -> dict[str, int]:
+    """How many estimates took the anchor's polar angle from gravity and its distance from depth, and how many
+    views' masks each method made."""
+    details = [estimate["details"] for estimate in run.estimates if estimate.get("details")]
+    used = {"estimates": len(run.estimates),
+            "polar_from_gravity": sum(d["polar_source"] == "gravity" for d in details),
+            "distance_from_depth": sum(d["distance_source"] == "depth" for d in details)}
+    methods = [view["mask_method"] for d in details for view in d["views"]]
+    return {**used, **{f"masks_{method}": methods.count(method) for method in sorted(set(methods))}}
+
+
+def inputs_sentence(extras: ExtraTopics, used: dict[str, int]) -> str:
+    """One line on the views' other inputs and what they did, for report.md (empty without any)."""
+    given = [f"{kind} from {topic}" for kind, topic in (("gravity", extras.gravity_topic), ("depth", extras.depth_topic),
+             ("intrinsics", extras.camera_info_topic), ("masks", extras.mask_topic)) if topic]
+    masks = ", ".join(f"{key[6:]} {count}" for key, count in used.items() if key.startswith("masks_"))
+    effect = (f"of {used['estimates']} estimates, {used['polar_from_gravity']} took the anchor's polar angle from "
+              f"gravity and {used['distance_from_depth']} its distance from depth")
+    return (f"Inputs: {', '.join(given) or 'the images only'}; {effect}" + (f"; masks: {masks}" if masks else "")
+            + ".\n")
+
+
 def plot_cameras(path: Path, true_c2w: np.ndarray, pred_c2w: np.ndarray, views: list[int], title: str) -> None:
     """True (black) and estimated (red) camera centres and viewing directions around the object, paired by dots."""
     figure = plt.figure(figsize=(6, 6))
@@ -88,6 +112,7 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
     views_by_id = {view.view_id: view for view in views.views}
     report = {
         "bag": str(run.bag), "image_topic": gt.image_topic, "ground_truth": gt.description,
+        "inputs": {**asdict(gt.extras), "used": inputs_used(run)},
         "mode": mode, "model": model,
         "node_parameters": {"solver_preset": preset, **values},
         "protocol": {"samples": protocol.samples, "seed": protocol.seed, "pick_size": len(run.picks[0]),
@@ -110,7 +135,8 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         f"{protocol.samples} pick{'s' if protocol.samples != 1 else ''} of {report['protocol']['pick_size']} views "
         f"(seed {protocol.seed}), "
         f"evaluated on their first {', '.join(map(str, run.view_counts))} views; the first view is the anchor.\n"
-        f"Ground truth: {report['ground_truth']}. Views on {gt.image_topic}: {len(views.views)}, "
+        f"Ground truth: {report['ground_truth']}. {inputs_sentence(gt.extras, report['inputs']['used'])}"
+        f"Views on {gt.image_topic}: {len(views.views)}, "
         f"usable {len(views.pool)}, skipped {len(views.skipped)}.\n\n"
         f"{table}\n\n"
         "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance. "
