@@ -69,9 +69,10 @@ def inputs_used(run: BagEvaluation) -> dict[str, int]:
 
 
 def inputs_sentence(extras: ExtraTopics, used: dict[str, int]) -> str:
-    """One line on the views' other inputs and what they did, for report.md (empty without any)."""
-    given = [f"{kind} from {topic}" for kind, topic in (("gravity", extras.gravity_topic), ("depth", extras.depth_topic),
-             ("intrinsics", extras.camera_info_topic), ("masks", extras.mask_topic)) if topic]
+    """One line on the views' other inputs and what they did, for report.md."""
+    topics = (("gravity", extras.gravity_topic), ("depth", extras.depth_topic),
+              ("intrinsics", extras.camera_info_topic), ("masks", extras.mask_topic))
+    given = [f"{kind} from {topic}" for kind, topic in topics if topic]
     masks = ", ".join(f"{key[6:]} {count}" for key, count in used.items() if key.startswith("masks_"))
     effect = (f"of {used['estimates']} estimates, {used['polar_from_gravity']} took the anchor's polar angle from "
               f"gravity and {used['distance_from_depth']} its distance from depth")
