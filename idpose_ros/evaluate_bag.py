@@ -147,6 +147,11 @@ class EstimateTask:
     true_c2w: np.ndarray
     seed: int
 
+    @property
+    def baseline_seed(self) -> tuple[int, int, int]:
+        """The seed of this estimate's random-pose baseline: the same wherever and whenever it runs."""
+        return self.seed, self.index, self.n
+
 
 @dataclass(frozen=True)
 class EstimateOutcome:
@@ -164,12 +169,20 @@ def plan_tasks(views: BagViews, ground_truth: GroundTruthOptions, protocol: Eval
     """The protocol's estimates on these views, in order: each seeded pick with each usable view count."""
     picks = draw_picks(views.pool, protocol.samples, protocol.seed)
     counts = usable_view_counts(protocol.view_counts, len(views.pool))
+    cameras = [object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), ground_truth.object_center,
+                                ground_truth.up) for pick in picks]
+    return tasks_for_picks(picks, cameras, counts, protocol.seed)
+
+
+def tasks_for_picks(picks: Sequence[Sequence[int]], true_cameras: Sequence[np.ndarray], view_counts: Sequence[int],
+                    seed: int) -> list[EstimateTask]:
+    """Each pick (view ids, anchor first; ``true_cameras``: its (k, 4, 4) OpenGL cameras in the object frame)
+    estimated on its first n views for every n of ``view_counts`` it holds, in order; ``seed`` seeds the
+    random baselines. Whoever chose the picks (seeded draws from a bag, fixed samples of a data set)."""
     tasks: list[EstimateTask] = []
-    for sample, pick in enumerate(picks):
-        true_c2w = object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), ground_truth.object_center,
-                                    ground_truth.up)
-        tasks += [EstimateTask(sample, len(tasks) + k, tuple(pick), n, true_c2w, protocol.seed)
-                  for k, n in enumerate(counts)]
+    for sample, (pick, true_c2w) in enumerate(zip(picks, true_cameras, strict=True)):
+        counts = [n for n in view_counts if n <= len(pick)]
+        tasks += [EstimateTask(sample, len(tasks) + k, tuple(pick), n, true_c2w, seed) for k, n in enumerate(counts)]
     return tasks
 
 
@@ -187,7 +200,7 @@ def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, messages: Sequ
     row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "seconds": estimate.seconds,
            "anchor_polar_deg": anchor_polar_deg, "object_distance": distance}
     predicted = np.concatenate([true_c2w[:1], predicted_c2w(true_c2w[0], [r["pred_rel_sph"] for r in records])])
-    return EstimateOutcome(records, random_baseline(true_c2w, (task.seed, task.index, task.n)), row, predicted)
+    return EstimateOutcome(records, random_baseline(true_c2w, task.baseline_seed), row, predicted)
 
 
 def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str, Any]]:
