@@ -280,21 +280,31 @@ def ground_truth_options(args: argparse.Namespace) -> GroundTruthOptions:
                               tuple(args.object_center), tuple(args.up))
 
 
-def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="evaluate_bag", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
-    parser.add_argument("bag", type=Path, help="rosbag2 bag: a folder with metadata.yaml, or a .mcap/.db3 file")
-    parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
-    parser.add_argument("--samples", type=int, default=5, help="random picks of 8 views (default 5)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the picks")
+def add_protocol_arguments(parser: argparse.ArgumentParser, samples_help: str = "random picks of 8 views") -> None:
+    """The ``EvaluationProtocol`` as command-line options."""
+    parser.add_argument("--samples", type=int, default=5, help=f"{samples_help} (default 5)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the picks and of the random-pose baseline")
     parser.add_argument("--n", type=int, nargs="+", default=list(VIEW_COUNTS), help="view counts (default 2 4 6 8)")
-    add_ground_truth_arguments(parser)
-    add_estimator_arguments(parser)
-    args = parser.parse_args(argv)
+
+
+def protocol_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> EvaluationProtocol:
+    """The protocol ``add_protocol_arguments`` parsed; a usage error (exit 2) for values out of range."""
     if args.samples < 1:
         parser.error(f"--samples must be at least 1, got {args.samples}")
     if any(not 2 <= n <= PICK_SIZE for n in args.n):
         parser.error(f"--n takes view counts from 2 to {PICK_SIZE}, got {args.n}")
-    return args
+    return EvaluationProtocol(args.samples, args.seed, tuple(args.n))
+
+
+def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationProtocol]:
+    parser = argparse.ArgumentParser(prog="evaluate_bag", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
+    parser.add_argument("bag", type=Path, help="rosbag2 bag: a folder with metadata.yaml, or a .mcap/.db3 file")
+    parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
+    add_protocol_arguments(parser)
+    add_ground_truth_arguments(parser)
+    add_estimator_arguments(parser)
+    args = parser.parse_args(argv)
+    return args, protocol_options(parser, args)
 
 
 def skipped_note(views: BagViews) -> str | None:
@@ -307,8 +317,7 @@ def skipped_note(views: BagViews) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    protocol = EvaluationProtocol(args.samples, args.seed, tuple(args.n))
+    args, protocol = parse_args(argv)
     estimator = None
     try:
         options, ground_truth = estimator_options(args), ground_truth_options(args)

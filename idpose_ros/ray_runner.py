@@ -34,12 +34,8 @@ class WorkerResources:
     ``num_cpus`` threads in each."""
 
     workers: int | None = None
-    num_cpus: float = 1.0
+    num_cpus: int = 1
     num_gpus: float = 0.0
-
-    @property
-    def threads(self) -> int:
-        return max(1, int(self.num_cpus))
 
 
 @dataclass(frozen=True)
@@ -103,12 +99,12 @@ def worker_count(resources: WorkerResources) -> int:
     if resources.workers is not None:
         return resources.workers
     total = ray.cluster_resources()
-    fits = [int(total.get("CPU", 0) // resources.num_cpus)] if resources.num_cpus else []
-    fits += [int(total.get("GPU", 0) // resources.num_gpus)] if resources.num_gpus else []
-    count = min(fits) if fits else 1
+    count = int(total.get("CPU", 0) // resources.num_cpus)
+    if resources.num_gpus:
+        count = min(count, int(total.get("GPU", 0) // resources.num_gpus))
     if count < 1:
         raise RunnerError(f"the cluster has {total.get('CPU', 0):g} CPUs and {total.get('GPU', 0):g} GPUs: no worker "
-                          f"of {resources.num_cpus:g} CPUs and {resources.num_gpus:g} GPUs fits")
+                          f"of {resources.num_cpus} CPUs and {resources.num_gpus:g} GPUs fits")
     return count
 
 
@@ -158,7 +154,7 @@ class EstimatorPool:
         actor_class = ray.remote(EstimatorWorker).options(
             num_cpus=self.resources.num_cpus, num_gpus=self.resources.num_gpus, max_restarts=0,
             runtime_env={"env_vars": {"PYTHONPATH": f"{SOURCE_ROOT}{os.pathsep}${{PYTHONPATH}}"}})
-        actor = actor_class.remote(self.options, self.resources.threads)
+        actor = actor_class.remote(self.options, self.resources.num_cpus)
         self._actors.append(actor)
         self._pending[actor.ready.remote()] = (actor, None)
 
