@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import ray
+import torch
 from ray.exceptions import RayActorError, RayError, RayTaskError
 
 from idpose_ros.estimators import EstimatorOptions, ImageMessage, make_estimator
@@ -63,8 +64,6 @@ class EstimatorWorker:
     """The state of one Ray actor: the estimator with its model, loaded once, on ``threads`` torch threads."""
 
     def __init__(self, options: EstimatorOptions, threads: int):
-        import torch
-
         torch.set_num_threads(threads)
         self.estimator = make_estimator(options)
         self.name = f"{socket.gethostname()}:{os.getpid()}"
@@ -74,7 +73,8 @@ class EstimatorWorker:
         return self.name
 
     def estimate(self, task: EstimateTask, messages: list[ImageMessage]) -> tuple[EstimateOutcome, str]:
-        """``run_estimate`` on this worker's estimator; the random baseline stays behind (the driver has the seed)."""
+        """``run_estimate`` on this worker's estimator, less the random baseline (the driver redraws it from the
+        task's seed when it merges the report)."""
         outcome = run_estimate(self.estimator, task, messages)
         return EstimateOutcome(outcome.records, [], outcome.row, outcome.predicted_c2w), self.name
 
