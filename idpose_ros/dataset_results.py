@@ -54,20 +54,19 @@ class ResultsLog:
     """results.jsonl and run.json of an output folder: what is finished, and appending as estimates finish."""
 
     def __init__(self, out: Path, settings: dict[str, Any]):
-        """SettingsMismatch when the folder holds results of other settings."""
+        """SettingsMismatch when the folder holds results of other settings (settings without results are replaced:
+        a run that stopped before its first estimate, e.g. on a wrong model path, binds nothing)."""
         out.mkdir(parents=True, exist_ok=True)
         settings = json.loads(json.dumps(settings))
-        settings_path = out / SETTINGS_FILE
-        if settings_path.exists():
+        self.path, settings_path = out / RESULTS_FILE, out / SETTINGS_FILE
+        self.lines: dict[Key, dict[str, Any]] = self._read()
+        if self.lines and settings_path.exists():
             previous = json.loads(settings_path.read_text())
             changed = sorted(key for key in {*previous, *settings} if previous.get(key) != settings.get(key))
             if changed:
                 raise SettingsMismatch(f"{out} holds results made with other {', '.join(changed)} ({settings_path}); "
                                        "choose another --out, or rerun with the same settings to resume")
-        else:
-            settings_path.write_text(json.dumps(settings, indent=2) + "\n")
-        self.path = out / RESULTS_FILE
-        self.lines: dict[Key, dict[str, Any]] = self._read()
+        settings_path.write_text(json.dumps(settings, indent=2) + "\n")
         self._file = self.path.open("a")
 
     def _read(self) -> dict[Key, dict[str, Any]]:

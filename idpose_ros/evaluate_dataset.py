@@ -133,8 +133,8 @@ def main(argv: list[str] | None = None) -> int:
                 run(todo, log, options, resources, args.address, values["seed"], total - len(todo))
         except KeyboardInterrupt:
             finished = sum(log.done(task_key(item.name, task)) for item, tasks in planned for task in tasks)
-            print(f"\nevaluate_dataset: interrupted; {finished} of {total} estimates are in {log.path}: rerun the "
-                  "same command to resume", file=sys.stderr)
+            print(f"\nevaluate_dataset: interrupted; {finished} of {total} estimates have succeeded ({log.path}): "
+                  "rerun the same command to resume", file=sys.stderr)
             return INTERRUPTED
         except (RunnerError, BagError, InputError) as err:
             print(f"evaluate_dataset: error: {err}", file=sys.stderr)

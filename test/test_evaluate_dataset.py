@@ -175,6 +175,9 @@ def test_results_resume_and_the_report_merges_in_plan_order(tmp_path, duck_both_
         evaluation = merge(planned, log.lines, about)
     with pytest.raises(SettingsMismatch, match="other seed"):
         ResultsLog(tmp_path, {**settings, "seed": 1})
+    ResultsLog(tmp_path / "no_results", settings).close()  # e.g. stopped on a wrong model path: nothing is bound
+    ResultsLog(tmp_path / "no_results", {**settings, "seed": 1}).close()
+    assert json.loads((tmp_path / "no_results" / "run.json").read_text())["seed"] == 1
 
     assert [(r["input"], r["n"], r["view"]) for r in evaluation.records] == [
         (bag.name, 4, v) for v in bag_4.pick[1:4]] + [(official.name, 4, v) for v in official_4.pick[1:4]]
