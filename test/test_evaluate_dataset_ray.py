@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import ray
+from test_evaluate_dataset import DUCK, OPTIONS, REDUCED, ROOT, write_official_layout
 
 from idpose_ros import evaluate_dataset
 from idpose_ros.estimators import make_estimator
 from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions, evaluate_bag
-from test_evaluate_dataset import DUCK, OPTIONS, REDUCED, ROOT, write_official_layout
 
 PROTOCOL = EvaluationProtocol(samples=2, seed=0, view_counts=(2, 4))
 ESTIMATES, FAILING = 7, 1  # 4 of the bag, 2 of its first pick as official files, 1 blank sample
@@ -145,14 +145,16 @@ def test_ctrl_c_then_a_rerun_resumes_to_the_uninterrupted_report(ray_instance, a
     out = tmp_path / "interrupted"
     command = [sys.executable, "-m", "idpose_ros.evaluate_dataset", *arguments, "--out", str(out),
                "--address", ray_instance, "--workers", "1"]  # one worker: the first estimate comes sooner
-    process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        wait_for(lambda: any(line["status"] == "ok" for line in lines_of(out)), "a first estimate", timeout=100)
-        process.send_signal(signal.SIGINT)
-        _, err = process.communicate(timeout=60)
-    finally:
-        process.kill()
-    assert process.returncode == evaluate_dataset.INTERRUPTED and "interrupted" in err and "rerun" in err
+    with (tmp_path / "stderr.txt").open("w") as stderr:  # a file, not a pipe: nothing blocks the command's output
+        process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=stderr)
+        try:
+            wait_for(lambda: any(line["status"] == "ok" for line in lines_of(out)), "a first estimate", timeout=100)
+            process.send_signal(signal.SIGINT)
+            process.wait(timeout=60)
+        finally:
+            process.kill()
+    err = (tmp_path / "stderr.txt").read_text()
+    assert process.returncode == evaluate_dataset.INTERRUPTED and "interrupted" in err and "rerun" in err, err[-2000:]
     before = lines_of(out)
     assert 0 < len(before) < ESTIMATES  # stopped mid-run
     assert evaluate_dataset.main([*arguments, "--out", str(out)]) == 1  # resumed with two workers
