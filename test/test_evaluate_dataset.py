@@ -5,6 +5,7 @@ from the views of a shipped demo bag otherwise: the same views as a bag and as o
 the same estimate. The model is the embedded demo model with a reduced solver (wiring, not accuracy).
 """
 import json
+import subprocess
 from pathlib import Path
 
 import cv2
@@ -209,3 +210,13 @@ def test_the_cli_refuses_replay_and_bad_inputs(tmp_path, capsys):
     assert evaluate_dataset.main([str(DUCK), "--n", "8", "--out", str(tmp_path / "o"),
                                   "--solver-param", "keep_top=0"]) == 2
     assert "keep_top" in capsys.readouterr().err
+
+
+def test_ros2_run_finds_evaluate_dataset(workspace):
+    """As `ros2 run idpose_ros evaluate_dataset` runs it: the installed script, on the installed demo bag."""
+    prefix = workspace / "install" / "idpose_ros"
+    bag = prefix / "share" / "idpose_ros" / "data" / "demo_bags" / "duck"
+    script = (f". {workspace / 'install' / 'setup.sh'} && "
+              f"{prefix / 'lib' / 'idpose_ros' / 'evaluate_dataset'} {bag} --mode replay")
+    result = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and "--mode replay needs a ROS node per worker" in result.stderr, result.stderr

@@ -163,3 +163,11 @@ def test_ctrl_c_then_a_rerun_resumes_to_the_uninterrupted_report(ray_instance, a
     assert lines_of(out)[:len(before)] == before  # finished lines are kept, not redone
     reference = json.loads((uninterrupted[1] / "report.json").read_text())
     assert without_timing(json.loads((out / "report.json").read_text())) == without_timing(reference)
+
+
+def test_a_model_that_does_not_load_is_one_clear_error(ray_instance, tmp_path, capsys):
+    code = evaluate_dataset.main([str(DUCK), "--samples", "1", "--n", "2", "--workers", "1", "--model-path",
+                                  str(tmp_path / "none"), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "evaluate_dataset: error: a worker could not start" in err and "no such folder or file" in err
+    assert not (tmp_path / "out" / "results.jsonl").read_text()  # nothing ran, nothing is bound
