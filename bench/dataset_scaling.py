@@ -55,7 +55,7 @@ def main() -> None:
     args = parser.parse_args()
     bags = [str(path) for path in sorted((ROOT / "data" / "demo_bags").iterdir()) if (path / "metadata.yaml").is_file()]
     common = ["--seed", "0", "--preset", args.preset, "--num-cpus-per-worker", "1"]
-    result = {"arguments": vars(args) | {"out": str(args.out)}, "cpus": os.cpu_count(), "runs": {}}
+    result = {"arguments": vars(args) | {"out": os.path.relpath(args.out, ROOT)}, "cpus": os.cpu_count(), "runs": {}}
     with tempfile.TemporaryDirectory(prefix="idpose_dataset_scaling_") as folder:
         for workers in (1, 2):
             out = Path(folder) / f"workers_{workers}"
