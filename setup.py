@@ -26,6 +26,7 @@ setup(
         "console_scripts": [
             "estimator = idpose_ros.estimator_node:main",
             "evaluate_bag = idpose_ros.evaluate_bag:main",
+            "evaluate_dataset = idpose_ros.evaluate_dataset:main",
             "make_synthetic_bag = idpose_ros.make_synthetic_bag:main",
         ],
     },

@@ -46,6 +46,21 @@ def markdown_table(methods: dict[str, dict[str, dict[str, float | int]]]) -> str
     return "\n".join([header, rule, *rows])
 
 
+def summary_table(rows: dict[str, tuple[dict[str, float | int], dict[str, float | int]]], label: str = "object"
+                  ) -> str:
+    """One row per name (the first column headed ``label``): the model's pairs, RotAcc@15/30 and mean rotation
+    error beside the random-pose baseline's RotAcc@15/30; ``rows`` maps a name to (model, random) summaries."""
+    lines = [f"| {label} | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° "
+             "| random RotAcc@30° |",
+             "|---|---|---|---|---|---|---|"]
+    for name, (model, baseline) in rows.items():
+        lines.append(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | "
+                     f"{100 * model['rot_acc_30']:.1f} | "
+                     f"{model['mean_rot_err_deg']:.1f} | {100 * baseline['rot_acc_15']:.1f} | "
+                     f"{100 * baseline['rot_acc_30']:.1f} |")
+    return "\n".join(lines)
+
+
 def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, float | int], dict[str, float | int]]:
     """Over several evaluations: the model's summary of all their pairs, and the random-pose baseline's
     RotAcc@15/30 and mean rotation error weighted by each evaluation's guesses."""

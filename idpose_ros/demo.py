@@ -14,7 +14,7 @@ from pathlib import Path
 
 from idpose_core.zero123 import ModelLoadError
 from idpose_ros.bag_io import BagError
-from idpose_ros.bag_report import pooled_summaries, write_report
+from idpose_ros.bag_report import pooled_summaries, summary_table, write_report
 from idpose_ros.estimators import add_estimator_arguments, estimator_options, make_estimator
 from idpose_ros.evaluate_bag import BagEvaluation, EvaluationProtocol, evaluate_bag
 from idpose_ros.replay import ReplayError
@@ -29,20 +29,12 @@ def demo_bags() -> list[Path]:
     return sorted(path for path in DEMO_BAGS.iterdir() if (path / "metadata.yaml").is_file())
 
 
-def summary_table(evaluations: dict[str, BagEvaluation]) -> str:
+def demo_summary(evaluations: dict[str, BagEvaluation]) -> str:
     """One row per object and one for all pairs: RotAcc@15/30 and mean rotation error, model vs random poses."""
-    lines = ["| object | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° "
-             "| random RotAcc@30° |",
-             "|---|---|---|---|---|---|---|"]
     rows = {name: (evaluation.aggregates["all"], evaluation.random_aggregates["all"])
             for name, evaluation in evaluations.items()}
     rows["all"] = pooled_summaries(list(evaluations.values()))
-    for name, (model, baseline) in rows.items():
-        lines.append(f"| {name} | {model['pairs']} | {100 * model['rot_acc_15']:.1f} | "
-                     f"{100 * model['rot_acc_30']:.1f} | "
-                     f"{model['mean_rot_err_deg']:.1f} | {100 * baseline['rot_acc_15']:.1f} | "
-                     f"{100 * baseline['rot_acc_30']:.1f} |")
-    return "\n".join(lines)
+    return summary_table(rows)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         if estimator is not None:
             estimator.close()
     print("\nAll demo objects (n = 2; random poses: each target camera guessed uniformly on the sphere):\n"
-          + summary_table(evaluations), flush=True)
+          + demo_summary(evaluations), flush=True)
     return 0
 
 

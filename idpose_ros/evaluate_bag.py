@@ -146,6 +146,11 @@ class EstimateTask:
     true_c2w: np.ndarray
     seed: int
 
+    @property
+    def baseline_seed(self) -> tuple[int, int, int]:
+        """The seed of this estimate's random-pose baseline: the same wherever and whenever it runs."""
+        return self.seed, self.index, self.n
+
 
 @dataclass(frozen=True)
 class EstimateOutcome:
@@ -163,12 +168,20 @@ def plan_tasks(views: BagViews, ground_truth: GroundTruthOptions, protocol: Eval
     """The protocol's estimates on these views, in order: each seeded pick with each usable view count."""
     picks = draw_picks(views.pool, protocol.samples, protocol.seed)
     counts = usable_view_counts(protocol.view_counts, len(views.pool))
+    cameras = [object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), ground_truth.object_center,
+                                ground_truth.up) for pick in picks]
+    return tasks_for_picks(picks, cameras, counts, protocol.seed)
+
+
+def tasks_for_picks(picks: Sequence[Sequence[int]], true_cameras: Sequence[np.ndarray], view_counts: Sequence[int],
+                    seed: int) -> list[EstimateTask]:
+    """Each pick (view ids, anchor first; ``true_cameras``: its (k, 4, 4) OpenGL cameras in the object frame)
+    estimated on its first n views for every n of ``view_counts`` it holds, in order; ``seed`` seeds the
+    random baselines. Whoever chose the picks (seeded draws from a bag, fixed samples of a data set)."""
     tasks: list[EstimateTask] = []
-    for sample, pick in enumerate(picks):
-        true_c2w = object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), ground_truth.object_center,
-                                    ground_truth.up)
-        tasks += [EstimateTask(sample, len(tasks) + k, tuple(pick), n, true_c2w, protocol.seed)
-                  for k, n in enumerate(counts)]
+    for sample, (pick, true_c2w) in enumerate(zip(picks, true_cameras, strict=True)):
+        counts = [n for n in view_counts if n <= len(pick)]
+        tasks += [EstimateTask(sample, len(tasks) + k, tuple(pick), n, true_c2w, seed) for k, n in enumerate(counts)]
     return tasks
 
 
@@ -185,7 +198,7 @@ def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, views: Sequenc
     row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "seconds": estimate.seconds,
            "anchor_polar_deg": anchor_polar_deg, "object_distance": distance, "details": estimate.details}
     predicted = world_cameras(estimate.poses, true_c2w[0])
-    return EstimateOutcome(records, random_baseline(true_c2w, (task.seed, task.index, task.n)), row, predicted)
+    return EstimateOutcome(records, random_baseline(true_c2w, task.baseline_seed), row, predicted)
 
 
 def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str, Any]]:
@@ -279,21 +292,31 @@ def ground_truth_options(args: argparse.Namespace) -> GroundTruthOptions:
                               tuple(args.object_center), tuple(args.up), extras)
 
 
-def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="evaluate_bag", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
-    parser.add_argument("bag", type=Path, help="rosbag2 bag: a folder with metadata.yaml, or a .mcap/.db3 file")
-    parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
-    parser.add_argument("--samples", type=int, default=5, help="random picks of 8 views (default 5)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the picks")
+def add_protocol_arguments(parser: argparse.ArgumentParser, samples_help: str = "random picks of 8 views") -> None:
+    """The ``EvaluationProtocol`` as command-line options."""
+    parser.add_argument("--samples", type=int, default=5, help=f"{samples_help} (default 5)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the picks and of the random-pose baseline")
     parser.add_argument("--n", type=int, nargs="+", default=list(VIEW_COUNTS), help="view counts (default 2 4 6 8)")
-    add_ground_truth_arguments(parser)
-    add_estimator_arguments(parser)
-    args = parser.parse_args(argv)
+
+
+def protocol_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> EvaluationProtocol:
+    """The protocol ``add_protocol_arguments`` parsed; a usage error (exit 2) for values out of range."""
     if args.samples < 1:
         parser.error(f"--samples must be at least 1, got {args.samples}")
     if any(not 2 <= n <= PICK_SIZE for n in args.n):
         parser.error(f"--n takes view counts from 2 to {PICK_SIZE}, got {args.n}")
-    return args
+    return EvaluationProtocol(args.samples, args.seed, tuple(args.n))
+
+
+def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationProtocol]:
+    parser = argparse.ArgumentParser(prog="evaluate_bag", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
+    parser.add_argument("bag", type=Path, help="rosbag2 bag: a folder with metadata.yaml, or a .mcap/.db3 file")
+    parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
+    add_protocol_arguments(parser)
+    add_ground_truth_arguments(parser)
+    add_estimator_arguments(parser)
+    args = parser.parse_args(argv)
+    return args, protocol_options(parser, args)
 
 
 def skipped_note(views: BagViews) -> str | None:
@@ -306,8 +329,7 @@ def skipped_note(views: BagViews) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    protocol = EvaluationProtocol(args.samples, args.seed, tuple(args.n))
+    args, protocol = parse_args(argv)
     estimator = None
     try:
         options, ground_truth = estimator_options(args), ground_truth_options(args)
