@@ -7,6 +7,7 @@ node's message handling can be tested and reused without a model.
 from msg_adapters.compressed import compressed_to_rgb
 from msg_adapters.encodings import Encoding, lookup_encoding
 from msg_adapters.errors import AdapterError
+from msg_adapters.image_size import ImageTooLarge, encoded_size
 from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
 from msg_adapters.markers import camera_markers
 from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_array
@@ -14,9 +15,11 @@ from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_arr
 __all__ = [
     "AdapterError",
     "Encoding",
+    "ImageTooLarge",
     "array_to_image",
     "camera_markers",
     "compressed_to_rgb",
+    "encoded_size",
     "image_to_array",
     "image_to_rgb",
     "lookup_encoding",
