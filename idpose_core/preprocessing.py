@@ -6,6 +6,8 @@ seeded with the pixels whose colours are least like the border's, weighted towar
 (a cluttered photo is assumed to have the object roughly in the middle). One square window serves
 the whole set (the largest mask bounding box side times ``window_scale``), so every view keeps the
 same scale; it is centred on each view's object and padded with white where it leaves the image.
+A view whose mask cannot be an object the model can compare (none found, nearly the whole frame, or
+a speck) is refused by one plausibility rule, ``check_object_mask``, wherever views are prepared.
 """
 from __future__ import annotations
 
@@ -27,10 +29,16 @@ GRABCUT_ITERATIONS = 5
 BORDER_COLOURS = 8  # k-means clusters summarising the border's colours
 CENTRE_SIGMA = 1.0 / 3.0  # centre prior width, as a fraction of the image side
 SURE_OBJECT_SCORE = 0.5  # seed score (of the maximum) above which a pixel is surely object
+SURE_OBJECT_SHARE = 0.002  # of the pixels: fewer sure-object seeds than this and nothing stands out (noise)
+# The plausibility rule for an object mask (``check_object_mask``): Zero-1-to-3 compares whole objects
+# seen with a margin of background, so a view must show one of a size the model can see.
+MIN_IMAGE_SIDE = 32  # px: a smaller image holds too little of any object
+MIN_OBJECT_SIDE = 16  # px: the object's bounding box must be at least this long on its longer side
+MAX_OBJECT_SHARE = 0.9  # of the frame: a mask this large is background, or an object without a margin
 
 
 class PreprocessingError(ValueError):
-    """A view cannot be prepared (bad array, or no object found); the message names the view."""
+    """A view cannot be prepared (bad array, or no plausible object found); the message names the view."""
 
 
 @dataclass(frozen=True)
@@ -97,7 +105,8 @@ def _grabcut_seeds(small_rgb: np.ndarray) -> np.ndarray:
     otsu, _ = cv2.threshold(score8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     seeds = np.full(band.shape, cv2.GC_PR_BGD, dtype=np.uint8)
     seeds[score8 > otsu] = cv2.GC_PR_FGD
-    seeds[score8 >= max(otsu, 255 * SURE_OBJECT_SCORE)] = cv2.GC_FGD
+    # Surely object: a high score and a colour that really differs from every border colour (not in noise).
+    seeds[(score8 >= max(otsu, 255 * SURE_OBJECT_SCORE)) & (distinctiveness > FOREGROUND_CONTRAST)] = cv2.GC_FGD
     seeds[band] = cv2.GC_BGD
     return seeds
 
@@ -112,7 +121,7 @@ def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
     small = cv2.resize(rgb, (max(1, round(width * scale)), max(1, round(height * scale))), interpolation=cv2.INTER_AREA)
     cv2.setRNGSeed(0)
     seeds = _grabcut_seeds(small)
-    if not np.any(seeds == cv2.GC_FGD):  # nothing stands out from the border: no object to cut out
+    if np.mean(seeds == cv2.GC_FGD) < SURE_OBJECT_SHARE:  # nothing stands out from the border: no object
         return np.zeros((height, width), dtype=bool)
     labels = seeds.copy()
     cv2.grabCut(small, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
@@ -124,12 +133,19 @@ def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
     return cv2.resize(mask, (width, height), interpolation=cv2.INTER_LINEAR) >= 0.5
 
 
+def alpha_mask(alpha: np.ndarray | None) -> np.ndarray | None:
+    """The object mask an alpha channel carries, or None when there is none (no alpha, or fully opaque)."""
+    if alpha is None:
+        return None
+    mask = alpha > ALPHA_THRESHOLD
+    return None if mask.all() else mask
+
+
 def foreground_mask(rgb: np.ndarray, alpha: np.ndarray | None) -> tuple[np.ndarray, str]:
     """(mask (H, W) bool, method): "alpha" if ``alpha`` marks anything transparent, else "threshold", else "grabcut"."""
-    if alpha is not None:
-        mask = alpha > ALPHA_THRESHOLD
-        if not mask.all():
-            return mask, "alpha"
+    mask = alpha_mask(alpha)
+    if mask is not None:
+        return mask, "alpha"
     mask = threshold_mask(rgb)
     if mask is not None:
         return mask, "threshold"
@@ -162,16 +178,47 @@ def crop_padded(image: np.ndarray, window: tuple[int, int, int]) -> np.ndarray:
     return padded[y + top : y + top + side, x + left : x + left + side]
 
 
-def _check_view(index: int, rgb: np.ndarray, alpha: np.ndarray | None) -> None:
+def check_view(rgb: np.ndarray, alpha: np.ndarray | None, name: str = "view 0") -> None:
+    """``PreprocessingError`` (naming ``name``) unless ``rgb`` is RGB uint8 of at least MIN_IMAGE_SIDE a side
+    and ``alpha`` None or uint8 of its size."""
     if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise PreprocessingError(f"view {index}: expected an RGB uint8 array (H, W, 3), got "
+        raise PreprocessingError(f"{name}: expected an RGB uint8 array (H, W, 3), got "
                                  f"{getattr(rgb, 'dtype', type(rgb).__name__)} {getattr(rgb, 'shape', '')}")
-    if min(rgb.shape[:2]) < 8:
-        raise PreprocessingError(f"view {index}: image {rgb.shape[1]}x{rgb.shape[0]} is too small")
+    if min(rgb.shape[:2]) < MIN_IMAGE_SIDE:
+        raise PreprocessingError(f"{name}: image {rgb.shape[1]}x{rgb.shape[0]} is too small (at least "
+                                 f"{MIN_IMAGE_SIDE} px a side)")
     if alpha is not None and (not isinstance(alpha, np.ndarray) or alpha.dtype != np.uint8
                               or alpha.shape != rgb.shape[:2]):
-        raise PreprocessingError(f"view {index}: alpha must be uint8 {rgb.shape[:2]}, got "
+        raise PreprocessingError(f"{name}: alpha must be uint8 {rgb.shape[:2]}, got "
                                  f"{getattr(alpha, 'dtype', type(alpha).__name__)} {getattr(alpha, 'shape', '')}")
+
+
+def check_object_mask(mask: np.ndarray, method: str, name: str = "view 0") -> None:
+    """The plausibility rule: ``PreprocessingError`` unless ``mask`` shows one object the model can compare.
+
+    Refused: an empty mask (no object found), a mask covering more than MAX_OBJECT_SHARE of the frame
+    (no object separated from the background), and an object under MIN_OBJECT_SIDE px on its longer side.
+    """
+    if not mask.any():
+        raise PreprocessingError(f"{name}: no object found (empty {method} mask)")
+    share = float(np.mean(mask))
+    if share > MAX_OBJECT_SHARE:
+        raise PreprocessingError(f"{name}: the {method} mask covers {share:.0%} of the frame (at most "
+                                 f"{MAX_OBJECT_SHARE:.0%}): no object separated from its background")
+    _, _, width, height = bounding_box(mask)
+    if max(width, height) < MIN_OBJECT_SIDE:
+        raise PreprocessingError(f"{name}: the object ({method} mask) is only {width}x{height} px, too small to "
+                                 f"compare (at least {MIN_OBJECT_SIDE} px on its longer side)")
+
+
+def precheck_view(rgb: np.ndarray, alpha: np.ndarray | None, name: str = "view 0") -> None:
+    """The checks that need no mask computation, cheap enough for every captured image: the arrays, the
+    image size and, when ``alpha`` carries the mask, its plausibility. ``preprocess_views`` applies them
+    all again, and the plausibility rule to computed masks as well."""
+    check_view(rgb, alpha, name)
+    mask = alpha_mask(alpha)
+    if mask is not None:
+        check_object_mask(mask, "alpha", name)
 
 
 def preprocess_views(
@@ -179,7 +226,8 @@ def preprocess_views(
 ) -> PreprocessedViews:
     """N views (RGB uint8 (H_i, W_i, 3), alpha uint8 (H_i, W_i) or None) -> ``PreprocessedViews`` of (N, 3, size, size).
 
-    Raises ``PreprocessingError`` naming the view for a malformed array or an empty object mask.
+    Raises ``PreprocessingError`` naming the view for a malformed array or an implausible object mask
+    (``check_object_mask``).
     """
     if len(rgbs) == 0 or len(rgbs) != len(alphas):
         raise PreprocessingError(f"need one alpha entry (or None) per view, got {len(rgbs)} images and {len(alphas)}")
@@ -187,10 +235,9 @@ def preprocess_views(
         raise PreprocessingError(f"size must be >= 1 and window_scale > 0, got {size} and {window_scale}")
     masks, methods = [], []
     for index, (rgb, alpha) in enumerate(zip(rgbs, alphas)):
-        _check_view(index, rgb, alpha)
+        check_view(rgb, alpha, f"view {index}")
         mask, method = foreground_mask(rgb, alpha)
-        if not mask.any():
-            raise PreprocessingError(f"view {index}: no object found (empty {method} mask)")
+        check_object_mask(mask, method, f"view {index}")
         masks.append(mask)
         methods.append(method)
     largest_side = max(max(bounding_box(mask)[2:]) for mask in masks)
