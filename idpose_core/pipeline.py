@@ -60,12 +60,12 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
 
     The predictor's ``solver_defaults`` (the demo model's noise levels) fill the solver settings the
     caller did not choose. Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and
-    the solver's ``Cancelled`` when ``cancel`` is set.
+    ``Cancelled`` when ``cancel`` is set (checked between views while preprocessing, then in the solver).
     """
     if len(views) < 2:
         raise ValueError(f"need at least 2 views, got {len(views)}")
     preprocessed = preprocess_views([view.rgb for view in views], [view.alpha for view in views],
-                                    size=settings.image_size)
+                                    size=settings.image_size, cancel=cancel)
     solver_config = settings.solver.with_recommended(predictor.solver_defaults)
     solved = estimate_poses(predictor, preprocessed.images, solver_config, progress=progress, cancel=cancel)
     poses = anchor_frame_poses(solved.rel_poses, settings.anchor_polar, settings.object_distance)

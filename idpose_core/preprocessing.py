@@ -11,11 +11,14 @@ a speck) is refused by one plausibility rule, ``check_object_mask``, wherever vi
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import torch
+
+from idpose_core.cancellation import raise_if_cancelled
 
 WHITE = (255, 255, 255)
 ALPHA_THRESHOLD = 127  # alpha above this is object
@@ -222,12 +225,13 @@ def precheck_view(rgb: np.ndarray, alpha: np.ndarray | None, name: str = "view 0
 
 
 def preprocess_views(
-    rgbs: list[np.ndarray], alphas: list[np.ndarray | None], size: int = 256, window_scale: float = 1.5
+    rgbs: list[np.ndarray], alphas: list[np.ndarray | None], size: int = 256, window_scale: float = 1.5,
+    cancel: threading.Event | None = None,
 ) -> PreprocessedViews:
     """N views (RGB uint8 (H_i, W_i, 3), alpha uint8 (H_i, W_i) or None) -> ``PreprocessedViews`` of (N, 3, size, size).
 
     Raises ``PreprocessingError`` naming the view for a malformed array or an implausible object mask
-    (``check_object_mask``).
+    (``check_object_mask``), and ``Cancelled`` when ``cancel`` is set (checked before each view's mask).
     """
     if len(rgbs) == 0 or len(rgbs) != len(alphas):
         raise PreprocessingError(f"need one alpha entry (or None) per view, got {len(rgbs)} images and {len(alphas)}")
@@ -236,6 +240,7 @@ def preprocess_views(
     masks, methods = [], []
     for index, (rgb, alpha) in enumerate(zip(rgbs, alphas)):
         check_view(rgb, alpha, f"view {index}")
+        raise_if_cancelled(cancel, f"preprocessing view {index}")
         mask, method = foreground_mask(rgb, alpha)
         check_object_mask(mask, method, f"view {index}")
         masks.append(mask)
