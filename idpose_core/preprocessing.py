@@ -188,7 +188,7 @@ def check_view(rgb: np.ndarray, alpha: np.ndarray | None, name: str = "view 0") 
         raise PreprocessingError(f"{name}: expected an RGB uint8 array (H, W, 3), got "
                                  f"{getattr(rgb, 'dtype', type(rgb).__name__)} {getattr(rgb, 'shape', '')}")
     if min(rgb.shape[:2]) < MIN_IMAGE_SIDE:
-        raise PreprocessingError(f"{name}: image {rgb.shape[1]}x{rgb.shape[0]} is too small (at least "
+        raise PreprocessingError(f"{name} is {rgb.shape[1]}x{rgb.shape[0]} px, too small (at least "
                                  f"{MIN_IMAGE_SIDE} px a side)")
     if alpha is not None and (not isinstance(alpha, np.ndarray) or alpha.dtype != np.uint8
                               or alpha.shape != rgb.shape[:2]):

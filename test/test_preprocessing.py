@@ -177,7 +177,7 @@ def test_pure_noise_has_no_object(size):
 
 
 @pytest.mark.parametrize("rgb, alpha, message", [
-    (square_on_white(8, 4), None, r"view 0: image 8x8 is too small \(at least 32 px a side\)"),
+    (square_on_white(8, 4), None, r"view 0 is 8x8 px, too small \(at least 32 px a side\)"),
     (square_on_white(64, 10), None, r"view 0: the object \(threshold mask\) is only 10x10 px, too small"),
     (square_on_white(64, 30), np.pad(np.full((62, 62), 255, np.uint8), 1),
      r"view 0: the alpha mask covers 94% of the frame \(at most 90%\): no object separated"),
@@ -189,7 +189,7 @@ def test_implausible_views_are_refused_with_the_reason(rgb, alpha, message):
 
 def test_the_cheap_precheck_refuses_what_needs_no_computed_mask():
     precheck_view(square_on_white(MIN_IMAGE_SIDE, 16), None, "the image")  # smallest plausible view
-    with pytest.raises(PreprocessingError, match="the image: image 31x31 is too small"):
+    with pytest.raises(PreprocessingError, match="the image is 31x31 px, too small"):
         precheck_view(square_on_white(MIN_IMAGE_SIDE - 1, 16), None, "the image")
     speck = np.zeros((64, 64), np.uint8)
     speck[30:35, 30:35] = 255
