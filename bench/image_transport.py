@@ -1,6 +1,8 @@
 """How many camera frames reach a subscriber in another process, per Fast DDS transport setting and QoS.
 
 Usage (from the repository root): .venv/bin/python bench/image_transport.py [--seconds 10] [--rate 30]
+       ... --role publish --payload "rgb8 1920x1080" --topic <topic>   stream to <topic> alone (the
+       estimator's load tests use it to stream HD frames from a process of their own)
 
 A bare rclpy publisher (a camera driver's stand-in, reliable like rclpy's default) streams frames
 (raw rgb8 1920x1080, 6.2 MB each, and jpeg 1280x720) at ``--rate`` Hz; a bare rclpy subscriber in
@@ -58,8 +60,8 @@ def frames(payload: str, width: int, height: int):
     return CompressedImage(format="rgb8; jpeg compressed bgr8", data=encoded.tobytes())
 
 
-def publish(payload: str, width: int, height: int, seconds: float, rate: float) -> dict:
-    """Wait for the subscriber, then send seconds x rate frames at rate Hz, numbered in header.frame_id."""
+def publish(payload: str, width: int, height: int, seconds: float, rate: float, topic: str = TOPIC) -> dict:
+    """Wait for a subscriber, then send seconds x rate frames at rate Hz, each with its own header.stamp."""
     import rclpy
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import CompressedImage, Image
@@ -67,7 +69,8 @@ def publish(payload: str, width: int, height: int, seconds: float, rate: float) 
     rclpy.init()
     node = rclpy.create_node("bench_publisher")
     msg = frames(payload, width, height)
-    publisher = node.create_publisher(Image if payload == "raw" else CompressedImage, TOPIC, QoSProfile(depth=10))
+    msg.header.frame_id = "camera_optical"
+    publisher = node.create_publisher(Image if payload == "raw" else CompressedImage, topic, QoSProfile(depth=10))
     deadline = time.monotonic() + MATCH_TIMEOUT
     while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -76,7 +79,6 @@ def publish(payload: str, width: int, height: int, seconds: float, rate: float) 
     start = time.monotonic()
     for index in range(count):
         time.sleep(max(0.0, start + index / rate - time.monotonic()))
-        msg.header.frame_id = str(index)
         msg.header.stamp = node.get_clock().now().to_msg()
         publisher.publish(msg)
     sent_seconds = time.monotonic() - start
@@ -93,12 +95,12 @@ def subscribe(payload: str, subscription: str, seconds: float) -> dict:
 
     rclpy.init()
     node = rclpy.create_node("bench_subscriber")
-    received: set[str] = set()
+    received: set[tuple[int, int]] = set()
     ages: list[float] = []
     last = [time.monotonic()]
 
     def on_frame(msg) -> None:
-        received.add(msg.header.frame_id)
+        received.add((msg.header.stamp.sec, msg.header.stamp.nanosec))
         now = node.get_clock().now().nanoseconds
         ages.append((now - (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)) * 1e-9)
         last[0] = time.monotonic()
@@ -139,12 +141,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=30.0)
-    parser.add_argument("--role", choices=("publish", "subscribe"), help=argparse.SUPPRESS)
-    parser.add_argument("--payload", choices=sorted(PAYLOADS), help=argparse.SUPPRESS)
+    parser.add_argument("--role", choices=("publish", "subscribe"), help="one side only (run_case starts both)")
+    parser.add_argument("--topic", default=TOPIC, help="topic of --role publish")
+    parser.add_argument("--payload", choices=sorted(PAYLOADS), help="payload of --role publish or subscribe")
     parser.add_argument("--subscription", choices=("best_effort", "reliable"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.role == "publish":
-        print(json.dumps(publish(*PAYLOADS[args.payload], args.seconds, args.rate)))
+        print(json.dumps(publish(*PAYLOADS[args.payload], args.seconds, args.rate, args.topic)))
         return
     if args.role == "subscribe":
         print(json.dumps(subscribe(PAYLOADS[args.payload][0], args.subscription, args.seconds)))
