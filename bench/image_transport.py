@@ -1,6 +1,6 @@
 """How many camera frames reach a subscriber in another process, per Fast DDS transport setting and QoS.
 
-Usage (from the repository root): .venv/bin/python bench/image_transport.py [--seconds 10] [--rate 30]
+Usage (from the repository root): .venv/bin/python bench/image_transport.py [--seconds 10] [--rate 30] [--repeat 3]
        ... --role publish --payload "rgb8 1920x1080" --topic <topic>   stream to <topic> alone (the
        estimator's load tests use it to stream HD frames from a process of their own)
 
@@ -10,8 +10,10 @@ another process counts the distinct frames it receives and how old they are on a
 Fast DDS's default transports; ``FASTDDS_BUILTIN_TRANSPORTS=LARGE_DATA``; and the shipped profile
 ``config/fastdds_large_images.xml`` (shared-memory segment of 32 MB) for the publisher, the
 subscriber or both; each with a best-effort subscription (sensor data, what the estimator uses) and
-a reliable one. No node of this project is involved. Prints a table and writes
-``bench/results/image_transport.json``. Not a test: the figures depend on the machine and its load.
+a reliable one. Every case runs ``--repeat`` times, the rounds interleaved so that a change of load
+on the machine touches every case alike. No node of this project is involved. Prints a table and
+writes ``bench/results/image_transport.json``. Not a test: the figures depend on the machine and its
+load.
 """
 from __future__ import annotations
 
@@ -39,8 +41,11 @@ TRANSPORTS = {  # name: (publisher's environment, subscriber's environment)
     "large SHM profile, subscriber": ({}, LARGE_SHM),
     "large SHM profile, both": (LARGE_SHM, LARGE_SHM),
 }
-CASES = [("rgb8 1920x1080", transport, subscription) for transport in TRANSPORTS
-         for subscription in ("best_effort", "reliable")] + [("jpeg 1280x720", "default", "best_effort")]
+RAW = "rgb8 1920x1080"
+CASES = [(RAW, "default", "best_effort"), (RAW, "default", "reliable"), (RAW, "LARGE_DATA, both", "best_effort"),
+         (RAW, "LARGE_DATA, both", "reliable"), (RAW, "large SHM profile, subscriber", "best_effort"),
+         (RAW, "large SHM profile, publisher", "best_effort"), (RAW, "large SHM profile, both", "best_effort"),
+         (RAW, "large SHM profile, both", "reliable"), ("jpeg 1280x720", "default", "best_effort")]
 MATCH_TIMEOUT = 20.0  # s for publisher and subscriber to discover each other
 DRAIN = 2.0  # s the subscriber keeps listening after the last frame
 
@@ -141,6 +146,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=30.0)
+    parser.add_argument("--repeat", type=int, default=3, help="runs per case")
     parser.add_argument("--role", choices=("publish", "subscribe"), help="one side only (run_case starts both)")
     parser.add_argument("--topic", default=TOPIC, help="topic of --role publish")
     parser.add_argument("--payload", choices=sorted(PAYLOADS), help="payload of --role publish or subscribe")
@@ -152,19 +158,30 @@ def main() -> None:
     if args.role == "subscribe":
         print(json.dumps(subscribe(PAYLOADS[args.payload][0], args.subscription, args.seconds)))
         return
-    rows = []
-    print(f"{'payload':16} {'transport':30} {'subscription':12} {'sent':>5} {'received':>8} {'delivered':>9} "
+    runs = [run_case(*case, args.seconds, args.rate) for _ in range(args.repeat) for case in CASES]
+    rows = [summary(case, [run for run in runs if (run["payload"], run["transport"], run["subscription"]) == case])
+            for case in CASES]
+    print(f"{'payload':16} {'transport':30} {'subscription':12} {'sent':>5} {'delivered (each run)':>22} "
           f"{'median age':>10}")
-    for payload_name, transport, subscription in CASES:
-        row = run_case(payload_name, transport, subscription, args.seconds, args.rate)
-        rows.append(row)
+    for row in rows:
+        each = " ".join(f"{percent:.0f}" for percent in row["delivered_percent_each"])
         age = f"{row['median_age_ms']} ms" if row["median_age_ms"] is not None else "-"
-        print(f"{payload_name:16} {transport:30} {subscription:12} {row['sent']:5d} {row['received']:8d} "
-              f"{row['delivered_percent']:8.1f}% {age:>10}", flush=True)
+        print(f"{row['payload']:16} {row['transport']:30} {row['subscription']:12} {row['sent']:5d} "
+              f"{row['delivered_percent']:6.0f}% ({each:>12}) {age:>10}")
     load = os.getloadavg()
-    RESULT.write_text(json.dumps({"seconds": args.seconds, "rate": args.rate, "cpus": os.cpu_count(),
-                                  "load_average": [round(x, 2) for x in load], "cases": rows}, indent=2) + "\n")
+    RESULT.write_text(json.dumps({"seconds": args.seconds, "rate": args.rate, "repeat": args.repeat,
+                                  "cpus": os.cpu_count(), "load_average": [round(x, 2) for x in load],
+                                  "cases": rows, "runs": runs}, indent=2) + "\n")
     print(f"written to {RESULT.relative_to(ROOT)}")
+
+
+def summary(case: tuple[str, str, str], runs: list[dict]) -> dict:
+    """One case over its runs: the median delivered share and age, and every run's share."""
+    ages = [run["median_age_ms"] for run in runs if run["median_age_ms"] is not None]
+    return {"payload": case[0], "transport": case[1], "subscription": case[2], "sent": runs[0]["sent"],
+            "delivered_percent": statistics.median(run["delivered_percent"] for run in runs),
+            "delivered_percent_each": [run["delivered_percent"] for run in runs],
+            "median_age_ms": round(statistics.median(ages), 1) if ages else None}
 
 
 if __name__ == "__main__":

@@ -245,7 +245,8 @@ class EstimatorNode(Node):
             return None, f"need at least 2 buffered views to estimate, have {len(views)}"
         values = current_values(self)
         settings, pipeline = node_settings(values), pipeline_settings(values)
-        frame_id = self._output_frame(settings, views[0])
+        named_frame = settings.anchor_frame or views[0].frame_id
+        frame_id = named_frame or FALLBACK_FRAME
 
         def job(progress: Progress, cancel: threading.Event) -> PipelineResult:
             predictor = self._model.get()  # waits for a start-up load still running
@@ -267,15 +268,10 @@ class EstimatorNode(Node):
             return None, refusal
         self.get_logger().info(f"estimating the poses of {len(views)} views, run {run_id} ({pipeline.solver.variant}, "
                                f"{pipeline.solver.refine_steps_per_view} refinement steps per view)")
-        return run_id, None
-
-    def _output_frame(self, settings: NodeSettings, anchor: View) -> str:
-        """``anchor_frame``, else the anchor image's frame, else FALLBACK_FRAME (with a warning)."""
-        frame_id = settings.anchor_frame or anchor.frame_id
-        if not frame_id:
+        if not named_frame:
             self.get_logger().warning(f"the anchor image has no header.frame_id and anchor_frame is not set: "
                                       f"publishing the poses in frame '{FALLBACK_FRAME}'")
-        return frame_id or FALLBACK_FRAME
+        return run_id, None
 
     def _on_estimated(self, outcome: Outcome, run_id: int, views: list[View], frame_id: str,
                       object_distance: float) -> None:
