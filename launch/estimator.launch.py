@@ -10,7 +10,7 @@ The node gets the Fast DDS profile config/fastdds_large_images.xml (a 32 MB shar
 UDP kept for other hosts), without which most raw HD frames are lost on the way (README, "The
 estimator node"), unless FASTRTPS_DEFAULT_PROFILES_FILE is set already (a profile of your own, or
 empty to keep Fast DDS's defaults) or another RMW than Fast DDS is chosen. Start the camera driver
-with the same variable: the profile must be on both sides.
+with the same variable: the publisher's segment is the one that counts.
 """
 import os
 
