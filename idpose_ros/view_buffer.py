@@ -35,8 +35,8 @@ class ImageRefused(CaptureRefused):
 class ViewBuffer:
     """Bounded list of kept views plus the latest image message seen, not decoded yet.
 
-    Both capture modes keep a view the same way: ``take_latest`` the message, decode it, ``keep``
-    the view. ``auto`` asks ``due`` first; ``on_request`` does it on ``~/capture``.
+    Both capture modes keep a view the same way, ``keep_latest``: the latest message is handed out
+    once, decoded and checked, and kept. ``auto`` asks ``due`` first; ``on_request`` does it on ``~/capture``.
     """
 
     def __init__(self, max_views: int) -> None:
@@ -70,7 +70,7 @@ class ViewBuffer:
         with self._lock:
             return self._last_kept_at is None or now - self._last_kept_at >= min_interval
 
-    def take_latest(self) -> RawImage:
+    def _take_latest(self) -> RawImage:
         """The newest image message, handed out once; ``CaptureRefused`` when the buffer is full or none came."""
         with self._lock:
             self._check_room()
@@ -79,7 +79,7 @@ class ViewBuffer:
             image, self._latest = self._latest, None
             return image
 
-    def keep(self, view: View, now: float) -> int:
+    def _keep(self, view: View, now: float) -> int:
         """Append a decoded view; returns the new number of views (``CaptureRefused`` when full)."""
         with self._lock:
             self._check_room()
@@ -90,8 +90,8 @@ class ViewBuffer:
     def keep_latest(self, prepare: Callable[[RawImage], View], now: float) -> tuple[View, int]:
         """Take the newest message, ``prepare`` it into a view (decode and check; it raises ``ImageRefused``
         for an image that cannot be one) and keep it; returns the view and the new number of views."""
-        view = prepare(self.take_latest())
-        return view, self.keep(view, now)
+        view = prepare(self._take_latest())
+        return view, self._keep(view, now)
 
     def anchor(self) -> View | None:
         """The first kept view, None while the buffer is empty."""
