@@ -7,6 +7,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 STATUS_NAME = "idpose_estimator: estimation"
+RUNNING_STATES = ("estimating", "cancelling")  # a run is still on the worker: no new one can start
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from idpose_core.pipeline import PipelineResult, estimate_view_poses, views_mosa
 from idpose_core.predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_core.solver import Progress
-from idpose_ros.diagnostics import EstimatorStatus, diagnostic_array
+from idpose_ros.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array
 from idpose_ros.estimation_worker import EstimationWorker, Outcome
 from idpose_ros.model_holder import ModelHolder
 from idpose_ros.parameters import NodeSettings, current_values, declare_parameters, node_settings, pipeline_settings
@@ -253,7 +253,7 @@ class EstimatorNode(Node):
             return estimate_view_poses(predictor, [view.input for view in views], pipeline, progress, cancel)
 
         with self._status_lock:  # held so that a run that ends at once cannot be overwritten by "estimating"
-            if self._state in ("estimating", "cancelling"):
+            if self._state in RUNNING_STATES:
                 verb = "running" if self._state == "estimating" else "stopping after a cancel"
                 return None, f"busy: the estimate (run {self._run_id}) is {verb}"
             run_id = self._run_id + 1
