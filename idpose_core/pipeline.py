@@ -103,12 +103,13 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     Gravity (``gravity_up``) de-rolls a view, and when the anchor has it, sets the anchor's polar angle and
     every other view's with it (then searched over azimuth only); the anchor's depth sets the object
     distance. The predictor's ``solver_defaults`` fill the solver settings the caller did not choose.
-    Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and the solver's ``Cancelled``.
+    Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and ``Cancelled`` when ``cancel``
+    is set (checked between views while preprocessing, then in the solver).
     """
     if len(views) < 2:
         raise ValueError(f"need at least 2 views, got {len(views)}")
     upright, rolls = zip(*(upright_view(view) for view in views))
-    preprocessed = preprocess_views(upright, size=settings.image_size)
+    preprocessed = preprocess_views(upright, size=settings.image_size, cancel=cancel)
     reports = [view_report(view, mask, method, note, roll) for view, mask, method, note, roll in
                zip(upright, preprocessed.masks, preprocessed.mask_methods, preprocessed.mask_notes, rolls)]
     anchor = reports[0]

@@ -7,10 +7,13 @@ image border is near-uniform (thresholding), else OpenCV GrabCut seeded with the
 are least like the border's, weighted towards the image centre (a cluttered photo is assumed to have
 the object roughly in the middle). One square window serves the whole set (the largest mask bounding
 box side times ``window_scale``), so every view keeps the same scale; it is centred on each view's
-object and padded with white where it leaves the image.
+object and padded with white where it leaves the image. A view whose mask cannot be an object the
+model can compare (none found, nearly the whole frame, or a speck) is refused by one plausibility rule,
+``check_object_mask``, wherever views are prepared.
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -18,6 +21,7 @@ import cv2
 import numpy as np
 import torch
 
+from idpose_core.cancellation import raise_if_cancelled
 from idpose_core.depth_segmentation import DepthSegmentationError, depth_cut
 from idpose_core.view_input import ViewInput, ViewInputError
 
@@ -33,10 +37,16 @@ GRABCUT_ITERATIONS = 5
 BORDER_COLOURS = 8  # k-means clusters summarising the border's colours
 CENTRE_SIGMA = 1.0 / 3.0  # centre prior width, as a fraction of the image side
 SURE_OBJECT_SCORE = 0.5  # seed score (of the maximum) above which a pixel is surely object
+SURE_OBJECT_SHARE = 0.002  # of the pixels: fewer sure-object seeds than this and nothing stands out (noise)
+# The plausibility rule for an object mask (``check_object_mask``): Zero-1-to-3 compares whole objects
+# seen with a margin of background, so a view must show one of a size the model can see.
+MIN_IMAGE_SIDE = 32  # px: a smaller image holds too little of any object
+MIN_OBJECT_SIDE = 16  # px: the object's bounding box must be at least this long on its longer side
+MAX_OBJECT_SHARE = 0.9  # of the frame: a mask this large is background, or an object without a margin
 
 
 class PreprocessingError(ValueError):
-    """A view cannot be prepared (bad array, or no object found); the message names the view."""
+    """A view cannot be prepared (bad array, or no plausible object found); the message names the view."""
 
 
 @dataclass(frozen=True)
@@ -105,7 +115,8 @@ def _grabcut_seeds(small_rgb: np.ndarray) -> np.ndarray:
     otsu, _ = cv2.threshold(score8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     seeds = np.full(band.shape, cv2.GC_PR_BGD, dtype=np.uint8)
     seeds[score8 > otsu] = cv2.GC_PR_FGD
-    seeds[score8 >= max(otsu, 255 * SURE_OBJECT_SCORE)] = cv2.GC_FGD
+    # Surely object: a high score and a colour that really differs from every border colour (not in noise).
+    seeds[(score8 >= max(otsu, 255 * SURE_OBJECT_SCORE)) & (distinctiveness > FOREGROUND_CONTRAST)] = cv2.GC_FGD
     seeds[band] = cv2.GC_BGD
     return seeds
 
@@ -120,7 +131,7 @@ def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
     small = cv2.resize(rgb, (max(1, round(width * scale)), max(1, round(height * scale))), interpolation=cv2.INTER_AREA)
     cv2.setRNGSeed(0)
     seeds = _grabcut_seeds(small)
-    if not np.any(seeds == cv2.GC_FGD):  # nothing stands out from the border: no object to cut out
+    if np.mean(seeds == cv2.GC_FGD) < SURE_OBJECT_SHARE:  # nothing stands out from the border: no object
         return np.zeros((height, width), dtype=bool)
     labels = seeds.copy()
     cv2.grabCut(small, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
@@ -130,6 +141,14 @@ def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
     sure_per_component[0] = 0
     mask = (components == int(np.argmax(sure_per_component))).astype(np.float32)
     return cv2.resize(mask, (width, height), interpolation=cv2.INTER_LINEAR) >= 0.5
+
+
+def alpha_mask(alpha: np.ndarray | None) -> np.ndarray | None:
+    """The object mask an alpha channel carries, or None when there is none (no alpha, or fully opaque)."""
+    if alpha is None:
+        return None
+    mask = alpha > ALPHA_THRESHOLD
+    return None if mask.all() else mask
 
 
 MASK_METHODS = ("mask", "alpha", "depth", "threshold", "grabcut")  # most trusted first
@@ -143,10 +162,9 @@ def foreground_mask(view: ViewInput) -> tuple[np.ndarray, str, str]:
     """
     if view.mask is not None:
         return np.asarray(view.mask, dtype=bool), "mask", ""
-    if view.alpha is not None:
-        mask = view.alpha > ALPHA_THRESHOLD
-        if not mask.all():
-            return mask, "alpha", ""
+    mask = alpha_mask(view.alpha)
+    if mask is not None:
+        return mask, "alpha", ""
     note = ""
     if view.depth is not None:
         try:
@@ -185,11 +203,53 @@ def crop_padded(image: np.ndarray, window: tuple[int, int, int]) -> np.ndarray:
     return padded[y + top : y + top + side, x + left : x + left + side]
 
 
-def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: float = 1.5) -> PreprocessedViews:
+def check_view(view: ViewInput, name: str = "view 0") -> None:
+    """``PreprocessingError`` (naming ``name``) unless the view's arrays fit together (``ViewInput.check``) and
+    its image is at least MIN_IMAGE_SIDE a side."""
+    try:
+        view.check(name)
+    except ViewInputError as err:
+        raise PreprocessingError(str(err)) from None
+    if min(view.rgb.shape[:2]) < MIN_IMAGE_SIDE:
+        raise PreprocessingError(f"{name} is {view.rgb.shape[1]}x{view.rgb.shape[0]} px, too small (at least "
+                                 f"{MIN_IMAGE_SIDE} px a side)")
+
+
+def check_object_mask(mask: np.ndarray, method: str, name: str = "view 0") -> None:
+    """The plausibility rule: ``PreprocessingError`` unless ``mask`` shows one object the model can compare.
+
+    Refused: an empty mask (no object found), a mask covering more than MAX_OBJECT_SHARE of the frame
+    (no object separated from the background), and an object under MIN_OBJECT_SIDE px on its longer side.
+    """
+    if not mask.any():
+        raise PreprocessingError(f"{name}: no object found (empty {method} mask)")
+    share = float(np.mean(mask))
+    if share > MAX_OBJECT_SHARE:
+        raise PreprocessingError(f"{name}: the {method} mask covers {share:.0%} of the frame (at most "
+                                 f"{MAX_OBJECT_SHARE:.0%}): no object separated from its background")
+    _, _, width, height = bounding_box(mask)
+    if max(width, height) < MIN_OBJECT_SIDE:
+        raise PreprocessingError(f"{name}: the object ({method} mask) is only {width}x{height} px, too small to "
+                                 f"compare (at least {MIN_OBJECT_SIDE} px on its longer side)")
+
+
+def precheck_view(view: ViewInput, name: str = "view 0") -> None:
+    """The checks that need no mask computation, cheap enough for every captured image: the arrays, the
+    image size and, when an external mask or the alpha channel carries the object, its plausibility.
+    ``preprocess_views`` applies them all again, and the plausibility rule to computed masks as well."""
+    check_view(view, name)
+    if view.mask is not None:
+        check_object_mask(np.asarray(view.mask, dtype=bool), "mask", name)
+    elif (mask := alpha_mask(view.alpha)) is not None:
+        check_object_mask(mask, "alpha", name)
+
+
+def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: float = 1.5,
+                     cancel: threading.Event | None = None) -> PreprocessedViews:
     """N views -> ``PreprocessedViews`` of (N, 3, size, size): masked to white, one window for all, resized.
 
-    Raises ``PreprocessingError`` naming the view for a malformed array, a too small image or an empty
-    object mask.
+    Raises ``PreprocessingError`` naming the view for a malformed array or an implausible object mask
+    (``check_object_mask``), and ``Cancelled`` when ``cancel`` is set (checked before each view's mask).
     """
     if len(views) == 0:
         raise PreprocessingError("no views to preprocess")
@@ -197,15 +257,10 @@ def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: 
         raise PreprocessingError(f"size must be >= 1 and window_scale > 0, got {size} and {window_scale}")
     masks, methods, notes = [], [], []
     for index, view in enumerate(views):
-        try:
-            view.check(index)
-        except ViewInputError as err:
-            raise PreprocessingError(str(err)) from None
-        if min(view.rgb.shape[:2]) < 8:
-            raise PreprocessingError(f"view {index}: image {view.rgb.shape[1]}x{view.rgb.shape[0]} is too small")
+        check_view(view, f"view {index}")
+        raise_if_cancelled(cancel, f"preprocessing view {index}")
         mask, method, note = foreground_mask(view)
-        if not mask.any():
-            raise PreprocessingError(f"view {index}: no object found (empty {method} mask)")
+        check_object_mask(mask, method, f"view {index}")
         masks.append(mask)
         methods.append(method)
         notes.append(note)

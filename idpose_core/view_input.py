@@ -36,33 +36,33 @@ class ViewInput:
     gravity_up: np.ndarray | None = None
     roi: tuple[int, int, int, int] | None = None
 
-    def check(self, index: int) -> None:
-        """Raise ``ViewInputError`` naming view ``index`` and the field when an array is malformed."""
+    def check(self, name: str = "view 0") -> None:
+        """Raise ``ViewInputError`` naming the view (``name``) and the field when an array is malformed."""
         rgb = self.rgb
         if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-            raise ViewInputError(f"view {index}: expected an RGB uint8 array (H, W, 3), got "
+            raise ViewInputError(f"{name}: expected an RGB uint8 array (H, W, 3), got "
                                  f"{getattr(rgb, 'dtype', type(rgb).__name__)} {getattr(rgb, 'shape', '')}")
         shape = rgb.shape[:2]
         for name, kinds in (("alpha", (np.uint8,)), ("mask", (np.bool_, np.uint8)), ("depth", (np.float32,))):
             value = getattr(self, name)
             if value is not None and (not isinstance(value, np.ndarray) or value.dtype.type not in kinds
                                       or value.shape != shape):
-                raise ViewInputError(f"view {index}: {name} must be {'/'.join(k.__name__ for k in kinds)} {shape}, "
+                raise ViewInputError(f"{name}: {name} must be {'/'.join(k.__name__ for k in kinds)} {shape}, "
                                      f"got {getattr(value, 'dtype', type(value).__name__)} "
                                      f"{getattr(value, 'shape', '')}")
         if self.intrinsics is not None:
             k = np.asarray(self.intrinsics, dtype=np.float64)
             if k.shape != (3, 3) or not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0:
-                raise ViewInputError(f"view {index}: intrinsics must be a finite 3x3 K with positive focal "
+                raise ViewInputError(f"{name}: intrinsics must be a finite 3x3 K with positive focal "
                                      f"lengths, got {k.tolist()}")
         if self.gravity_up is not None:
             up = np.asarray(self.gravity_up, dtype=np.float64)
             if up.shape != (3,) or not np.all(np.isfinite(up)) or abs(np.linalg.norm(up) - 1.0) > 1e-3:
-                raise ViewInputError(f"view {index}: gravity_up must be a unit 3-vector, got {up.tolist()}")
+                raise ViewInputError(f"{name}: gravity_up must be a unit 3-vector, got {up.tolist()}")
         if self.roi is not None:
             x, y, width, height = self.roi
             if width <= 0 or height <= 0 or x >= shape[1] or y >= shape[0] or x + width <= 0 or y + height <= 0:
-                raise ViewInputError(f"view {index}: roi {tuple(self.roi)} does not overlap the "
+                raise ViewInputError(f"{name}: roi {tuple(self.roi)} does not overlap the "
                                      f"{shape[1]}x{shape[0]} image")
 
     def principal_point(self) -> tuple[float, float]:

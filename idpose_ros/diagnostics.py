@@ -7,18 +7,21 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 STATUS_NAME = "idpose_estimator: estimation"
+RUNNING_STATES = ("estimating", "cancelling")  # a run is still on the worker: no new one can start
 
 
 @dataclass(frozen=True)
 class EstimatorStatus:
-    """What the node reports: ``state`` is idle, estimating or failed; ``run_id`` numbers the running or the
-    last estimate (0 before the first), as ``~/estimate`` answered it; ``model`` as ``ModelHolder.describe``."""
+    """What the node reports: ``state`` is idle, estimating, cancelling (a cancelled estimate is stopping) or
+    failed; ``run_id`` numbers the running or the last estimate (0 before the first), as ``~/estimate``
+    answered it; ``model`` as ``ModelHolder.describe``; ``images_received`` counts every image message."""
 
     state: str
     run_id: int
     views_buffered: int
     max_views: int
     model: str
+    images_received: int = 0
     stage: str = ""
     progress_percent: float = 0.0
     last_error: str = ""
@@ -49,6 +52,7 @@ def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> 
         "progress_percent": f"{status.progress_percent:.1f}",
         "views_buffered": str(status.views_buffered),
         "max_views": str(status.max_views),
+        "images_received": str(status.images_received),
         "model": status.model,
         "last_error": status.last_error,
         "last_run_seconds": "" if status.last_run_seconds is None else f"{status.last_run_seconds:.3f}",

@@ -12,7 +12,6 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
 from typing import Any
 
 import rclpy
@@ -30,31 +29,30 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from idpose_core.model_loading import load_predictor
-from idpose_core.pipeline import PipelineResult, ViewInput, estimate_view_poses, views_mosaic
+from idpose_core.pipeline import PipelineResult, estimate_view_poses, views_mosaic
 from idpose_core.predictor import NoisePredictor
+from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_core.solver import Progress
-from idpose_ros.diagnostics import EstimatorStatus, diagnostic_array
+from idpose_ros.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array
 from idpose_ros.estimation_worker import EstimationWorker, Outcome
 from idpose_ros.model_holder import ModelHolder
-from idpose_ros.parameters import current_values, declare_parameters, node_settings, pipeline_settings
-from idpose_ros.view_buffer import CaptureRefused, View, ViewBuffer
-from msg_adapters import (
-    AdapterError,
-    array_to_image,
-    camera_markers,
-    compressed_to_rgb,
-    image_to_rgb,
-    poses_to_pose_array,
-)
+from idpose_ros.parameters import NodeSettings, current_values, declare_parameters, node_settings, pipeline_settings
+from idpose_ros.raw_image import RawImage
+from idpose_ros.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
+from msg_adapters import AdapterError, ImageTooLarge, array_to_image, camera_markers, poses_to_pose_array
 
 NODE_NAME = "idpose_estimator"
 SHUTDOWN_TIMEOUT = 1.5  # s to let a cancelled estimate stop on Ctrl-C (the node must exit within 2 s)
 SPIN_PERIOD = 0.1  # s: the main thread sees Ctrl-C at least this often
-RESET_TIMEOUT = 5.0  # s ~/reset waits for a cancelled estimate before clearing the buffer anyway
-THROTTLE = 5.0  # s between two log lines about dropped images
+THROTTLE = 5.0  # s between two log lines about refused images
 MARKER_DEPTH = 0.15  # frustum depth as a share of object_distance
+FALLBACK_FRAME = "idpose_anchor"  # frame of the poses when neither anchor_frame nor the anchor image names one
 # Reliable and latched: a subscriber that joins late still gets the last result.
 RESULT_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# Requests wait in DDS until the executor takes them; with the default depth of 10, a burst of calls
+# overwrote all but the last 10 and their clients never got an answer. Every service callback answers
+# at once, so a deep queue holds a burst of this many calls per service without delaying any of them.
+SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class EstimatorNode(Node):
@@ -64,7 +62,8 @@ class EstimatorNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         try:
             declare_parameters(self)
-        except ParameterException:
+        except ParameterException as exc:
+            self.get_logger().fatal(f"invalid parameters: {exc}")  # the node's logger: its namespace and name
             self.destroy_node()
             raise
         settings = node_settings(current_values(self))
@@ -74,6 +73,8 @@ class EstimatorNode(Node):
         self._status_lock = threading.Lock()
         self._state = "idle"
         self._run_id = 0  # of the running or the last estimate; ~/estimate answers it, /diagnostics carries it
+        self._cancelled_by = ""  # what cancelled the current run: "~/cancel", "~/reset" or "shutdown"
+        self._images_received = 0  # counted by the image callbacks only (one callback group)
         self._last_error = ""
         self._last_run_seconds: float | None = None
         self._scores: tuple[float, ...] = ()
@@ -81,13 +82,13 @@ class EstimatorNode(Node):
         self.add_post_set_parameters_callback(self._on_parameters_set)
 
         images = MutuallyExclusiveCallbackGroup()  # one image at a time keeps capture order
-        services = MutuallyExclusiveCallbackGroup()  # one request at a time: no estimate/reset races
+        services = MutuallyExclusiveCallbackGroup()  # one request at a time, each answered at once
         self.create_subscription(Image, "image", self._on_image, qos_profile_sensor_data, callback_group=images)
         self.create_subscription(CompressedImage, "image/compressed", self._on_compressed, qos_profile_sensor_data,
                                  callback_group=images)
         for name, handler in (("capture", self._capture), ("estimate", self._estimate), ("cancel", self._cancel),
                               ("reset", self._reset)):
-            self.create_service(Trigger, f"~/{name}", handler, callback_group=services)
+            self.create_service(Trigger, f"~/{name}", handler, qos_profile=SERVICE_QOS, callback_group=services)
         self._poses_pub = self.create_publisher(PoseArray, "~/poses", RESULT_QOS)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", RESULT_QOS)
         self._views_pub = self.create_publisher(Image, "~/views", RESULT_QOS)
@@ -121,41 +122,58 @@ class EstimatorNode(Node):
 
     # ----- images ----------------------------------------------------------------------------------------------
     def _on_image(self, msg: Image) -> None:
-        self._take(lambda: image_to_rgb(msg), msg.header, f"Image {msg.encoding}", "image")
+        self._on_message(RawImage(msg, "image"))
 
     def _on_compressed(self, msg: CompressedImage) -> None:
-        self._take(lambda: compressed_to_rgb(msg), msg.header, f"CompressedImage {msg.format}", "image/compressed")
+        self._on_message(RawImage(msg, "image/compressed"))
 
-    def _take(self, decode: Callable[[], tuple], header: Any, source: str, topic: str) -> None:
-        """Decode one message; keep it as a view (auto) or remember it for ~/capture (on_request)."""
-        try:
-            rgb, alpha = decode()
-        except AdapterError as exc:
-            self.get_logger().warning(f"dropped a malformed message on {topic}: {exc}", throttle_duration_sec=THROTTLE)
-            return
-        except Exception as exc:  # an adapter bug must not kill the node or the views it holds
-            self.get_logger().error(f"dropped a message on {topic} that failed to decode: {type(exc).__name__}: {exc}",
-                                    throttle_duration_sec=THROTTLE)
-            return
-        view = View(ViewInput(rgb, alpha), frame_id=header.frame_id, stamp=header.stamp, source=source)
+    def _on_message(self, image: RawImage) -> None:
+        """Remember the image undecoded; in auto mode, keep it as a view when one is due."""
+        self._images_received += 1
+        self._buffer.observe(image)
         settings = node_settings(current_values(self))
-        if settings.capture_mode != "auto":
-            self._buffer.observe(view)
+        if settings.capture_mode != "auto" or not self._buffer.due(self._now(), settings.min_view_interval):
             return
         try:
-            count = self._buffer.keep_if_due(view, self._now(), settings.min_view_interval)
+            view, count = self._buffer.keep_latest(self._prepare, self._now())
+        except ImageRefused as exc:
+            self.get_logger().warning(f"refused {exc}", throttle_duration_sec=THROTTLE)
+            return
         except CaptureRefused as exc:
             self.get_logger().warning(f"not keeping the image: {exc}", throttle_duration_sec=THROTTLE)
             return
-        if count is not None:
-            self._kept(view, count, settings.views_per_estimate)
+        self._kept(view, count, settings)
 
-    def _kept(self, view: View, count: int, views_per_estimate: int) -> None:
+    def _prepare(self, image: RawImage) -> View:
+        """Decode ``image`` (its size checked first) and check it can be a view; ``ImageRefused`` says why not.
+
+        Whatever goes wrong, the node and the views it holds stay.
+        """
+        name = f"{image.source} on {image.topic}"
+        try:
+            pixels = image.decode(node_settings(current_values(self)).max_image_pixels)
+            precheck_view(pixels.rgb, pixels.alpha, name)
+        except ImageTooLarge as exc:
+            raise ImageRefused(f"{name}: {exc} (max_image_pixels)") from exc
+        except AdapterError as exc:
+            raise ImageRefused(f"{name}: {exc}") from exc
+        except PreprocessingError as exc:  # it names the image itself
+            raise ImageRefused(str(exc)) from exc
+        except Exception as exc:  # an adapter bug must not kill the node or the views it holds
+            raise ImageRefused(f"{name}: it failed to decode: {type(exc).__name__}: {exc}") from exc
+        return View(pixels, frame_id=image.frame_id, stamp=image.stamp, source=image.source)
+
+    def _kept(self, view: View, count: int, settings: NodeSettings) -> None:
         role = "anchor" if count == 1 else f"view {count}"
         height, width = view.input.rgb.shape[:2]
         self.get_logger().info(f"kept {role} ({view.source}, {width}x{height}, "
                                f"frame '{view.frame_id}'), {count} buffered")
-        if views_per_estimate > 0 and count == views_per_estimate:
+        anchor = self._buffer.anchor()
+        if count > 1 and anchor is not None and view.frame_id != anchor.frame_id:
+            self.get_logger().warning(
+                f"view {count} is in frame '{view.frame_id}' but the anchor in '{anchor.frame_id}': images from "
+                "different cameras or publishers are mixed in one view set (call ~/reset between objects)")
+        if settings.views_per_estimate > 0 and count == settings.views_per_estimate:
             _, refusal = self._start_estimate()
             if refusal:
                 self.get_logger().warning(f"automatic estimate not started: {refusal}")
@@ -163,14 +181,18 @@ class EstimatorNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    # ----- services ----------------------------------------------------------------------------------------------
+    # ----- services (each answers at once: nothing here waits for the worker) ----------------------------------
     def _capture(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
-            view, count = self._buffer.capture_latest(self._now())
+            view, count = self._buffer.keep_latest(self._prepare, self._now())
+        except ImageRefused as exc:
+            self.get_logger().warning(f"~/capture refused {exc}")
+            response.success, response.message = False, str(exc)
+            return response
         except CaptureRefused as exc:
             response.success, response.message = False, str(exc)
             return response
-        self._kept(view, count, node_settings(current_values(self)).views_per_estimate)
+        self._kept(view, count, node_settings(current_values(self)))
         response.success, response.message = True, f"captured view {count} ({view.source})"
         return response
 
@@ -181,24 +203,37 @@ class EstimatorNode(Node):
         return response
 
     def _cancel(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        if self._state != "estimating" or not self._worker.cancel():
-            response.success, response.message = False, "no estimate is running"
+        run_id = self._cancel_run("~/cancel")
+        if run_id is None:
+            response.success, response.message = False, self._nothing_to_cancel()
             return response
         response.success = True
-        response.message = f"cancelling the estimate; the {len(self._buffer)} views stay buffered"
+        response.message = f"cancelling the estimate (run {run_id}); the {len(self._buffer)} views stay buffered"
         return response
 
     def _reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        cancelled = self._state == "estimating" and self._worker.cancel()
-        if cancelled and not self._worker.wait(RESET_TIMEOUT):
-            self.get_logger().warning(f"the cancelled estimate did not stop within {RESET_TIMEOUT} s; "
-                                      "its result will be dropped")
+        """Cancel a running estimate (its result is dropped whenever it stops) and drop every view, at once."""
+        run_id = self._cancel_run("~/reset")
         dropped = self._buffer.clear()
-        self.get_logger().info(f"reset: dropped {dropped} views"
-                               + (" after cancelling the estimate" if cancelled else ""))
+        cancelled = "" if run_id is None else f" and cancelled the estimate (run {run_id})"
+        self.get_logger().info(f"reset: dropped {dropped} views{cancelled}")
         response.success = True
         response.message = f"dropped {dropped} views" + (" (cancelled the running estimate)" if cancelled else "")
         return response
+
+    def _cancel_run(self, cause: str) -> int | None:
+        """Ask the running estimate to stop; its run id, or None when none is running."""
+        with self._status_lock:
+            if self._state != "estimating" or not self._worker.cancel():
+                return None
+            self._state, self._cancelled_by = "cancelling", cause
+            return self._run_id
+
+    def _nothing_to_cancel(self) -> str:
+        with self._status_lock:
+            if self._state == "cancelling":
+                return f"the estimate (run {self._run_id}) is already stopping"
+            return "no estimate is running"
 
     # ----- estimation ----------------------------------------------------------------------------------------------
     def _start_estimate(self) -> tuple[int | None, str | None]:
@@ -210,39 +245,51 @@ class EstimatorNode(Node):
             return None, f"need at least 2 buffered views to estimate, have {len(views)}"
         values = current_values(self)
         settings, pipeline = node_settings(values), pipeline_settings(values)
-        frame_id = settings.anchor_frame or views[0].frame_id
+        named_frame = settings.anchor_frame or views[0].frame_id
+        frame_id = named_frame or FALLBACK_FRAME
 
         def job(progress: Progress, cancel: threading.Event) -> PipelineResult:
             predictor = self._model.get()  # waits for a start-up load still running
             return estimate_view_poses(predictor, [view.input for view in views], pipeline, progress, cancel)
 
-        def on_done(outcome: Outcome) -> None:
-            self._on_estimated(outcome, views, frame_id, settings.object_distance)
-
         with self._status_lock:  # held so that a run that ends at once cannot be overwritten by "estimating"
+            if self._state in RUNNING_STATES:
+                verb = "running" if self._state == "estimating" else "stopping after a cancel"
+                return None, f"busy: the estimate (run {self._run_id}) is {verb}"
+            run_id = self._run_id + 1
+
+            def on_done(outcome: Outcome) -> None:
+                self._on_estimated(outcome, run_id, views, frame_id, settings.object_distance)
+
             refusal = self._worker.start("estimate", job, on_done)
             if refusal is None:
-                self._run_id += 1
-                self._state, self._last_error, run_id = "estimating", "", self._run_id
+                self._run_id, self._state, self._last_error = run_id, "estimating", ""
         if refusal is not None:
             return None, refusal
         self.get_logger().info(f"estimating the poses of {len(views)} views, run {run_id} ({pipeline.solver.variant}, "
                                f"{pipeline.solver.refine_steps_per_view} refinement steps per view)")
+        if not named_frame:
+            self.get_logger().warning(f"the anchor image has no header.frame_id and anchor_frame is not set: "
+                                      f"publishing the poses in frame '{FALLBACK_FRAME}'")
         return run_id, None
 
-    def _on_estimated(self, outcome: Outcome, views: list[View], frame_id: str, object_distance: float) -> None:
+    def _on_estimated(self, outcome: Outcome, run_id: int, views: list[View], frame_id: str,
+                      object_distance: float) -> None:
         if outcome.status == "cancelled":
-            self.get_logger().info(f"estimate cancelled after {outcome.seconds:.1f} s; "
-                                   f"the {len(self._buffer)} buffered views are kept")
-            self._set_state("idle", "cancelled")
+            cause = self._cancelled_by
+            kept = {"~/reset": "its views were dropped",
+                    "~/cancel": f"the {len(self._buffer)} buffered views stay for a retry"}.get(cause)
+            self.get_logger().info(f"estimate (run {run_id}) stopped {outcome.seconds:.1f} s after it started, "
+                                   f"cancelled by {cause}" + (f"; {kept}" if kept else ""))
+            self._finish(run_id, "idle", "cancelled")
             return
         if outcome.status == "failed":
             if self._model.problem:  # already logged once by _model_unavailable
-                self._set_state("failed", self._model.problem)
+                self._finish(run_id, "failed", self._model.problem)
                 return
-            self.get_logger().error(f"estimate failed after {outcome.seconds:.1f} s: {outcome.error}; "
+            self.get_logger().error(f"estimate (run {run_id}) failed after {outcome.seconds:.1f} s: {outcome.error}; "
                                     f"the {len(self._buffer)} buffered views are kept")
-            self._set_state("failed", outcome.error)
+            self._finish(run_id, "failed", outcome.error)
             return
         result: PipelineResult = outcome.value
         self._publish(result, views[0], frame_id, object_distance)
@@ -251,7 +298,7 @@ class EstimatorNode(Node):
             self._last_run_seconds = outcome.seconds
             self._scores = tuple(float(s) for s in solved.scores)
             self._ambiguous = tuple(bool(a) for a in solved.ambiguous)
-        self._set_state("idle")
+        self._finish(run_id, "idle")
         self.get_logger().info(f"published {len(result.poses)} poses in frame '{frame_id}' "
                                f"after {outcome.seconds:.1f} s ({int(sum(self._ambiguous))} ambiguous)")
 
@@ -268,14 +315,19 @@ class EstimatorNode(Node):
         with self._status_lock:
             self._state, self._last_error = state, error
 
+    def _finish(self, run_id: int, state: str, error: str = "") -> None:
+        """The end state of run ``run_id``, unless a later run has started meanwhile."""
+        with self._status_lock:
+            if run_id == self._run_id:
+                self._state, self._last_error = state, error
+
     def status(self) -> EstimatorStatus:
         """A consistent snapshot of what /diagnostics reports."""
         progress = self._worker.progress
         with self._status_lock:
             return EstimatorStatus(
                 state=self._state, run_id=self._run_id, views_buffered=len(self._buffer),
-                max_views=self._buffer.max_views,
-                model=self._model.describe(),
+                max_views=self._buffer.max_views, model=self._model.describe(), images_received=self._images_received,
                 stage=progress.stage if progress else "", progress_percent=progress.percent if progress else 0.0,
                 last_error=self._last_error, last_run_seconds=self._last_run_seconds,
                 scores=self._scores, ambiguous=self._ambiguous)
@@ -291,7 +343,7 @@ class EstimatorNode(Node):
 
     def stop(self, timeout: float = SHUTDOWN_TIMEOUT) -> bool:
         """Cancel a running estimate and wait up to ``timeout`` s; True when nothing is left running."""
-        if self._worker.cancel():
+        if self._cancel_run("shutdown") is not None:
             self.get_logger().info("shutting down: cancelling the running estimate")
         return self._worker.wait(timeout)
 
@@ -311,8 +363,7 @@ def run(args: list[str] | None = None) -> int:
         signal.signal(signum, _interrupt)
     try:
         node = EstimatorNode()
-    except ParameterException as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"invalid parameters: {exc}")
+    except ParameterException:  # logged by the node, under its full name
         rclpy.try_shutdown()
         return 2
     executor = MultiThreadedExecutor(num_threads=4)

@@ -50,6 +50,9 @@ class NodeSettings:
     views_per_estimate: int = field(default=0, metadata=_spec(
         "start an estimate automatically when this many views are buffered (0 = only on ~/estimate)",
         bounds=(0, 64)))
+    max_image_pixels: int = field(default=4096 * 4096, metadata=_spec(
+        "largest image accepted, in pixels (width x height), read from the header before decoding; larger "
+        "images are refused", bounds=(32 * 32, 2**28)))
     anchor_polar_deg: float = field(default=90.0, metadata=_spec(
         "polar angle of the anchor camera around the object (deg from world up +z; 90 = level), "
         "turns relative spherical poses into SE(3) and narrows the polar search", bounds=(1.0, 179.0)))

@@ -31,7 +31,7 @@ from std_srvs.srv import Trigger
 from idpose_core.evaluation import PICK_SIZE, ViewSetEstimate
 from idpose_core.solver import Progress
 from idpose_ros.bag_views import ViewMessages
-from idpose_ros.diagnostics import STATUS_NAME
+from idpose_ros.diagnostics import RUNNING_STATES, STATUS_NAME
 from idpose_ros.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
 from msg_adapters import pose_to_matrix
 
@@ -110,7 +110,7 @@ class ReplayEstimator:
                                       f"(waited {CONNECT_TIMEOUT:g} s; is --node its fully qualified name?)")
             if not self._parameters.wait_for_services(timeout_sec=CONNECT_TIMEOUT):
                 raise ReplayError(f"the parameter services of {self.node_name} do not answer")
-            self._wait_for_status(lambda status: status["state"] != "estimating", self.timeout,
+            self._wait_for_status(lambda status: status["state"] not in RUNNING_STATES, self.timeout,
                                   "finish its running estimate")
             model = {"node": self.node_name, **self._get_parameters(("model_path", "device", "precision"))}
             self.description = {"mode": "replay", "model": model, "solver_preset": preset}
@@ -200,8 +200,9 @@ class ReplayEstimator:
         run = RUN_ID.search(response.message)
         if not response.success or run is None:
             raise ReplayError(f"{self.node_name}/estimate refused: {response.message}")
-        status = self._wait_for_status(lambda status: status["run_id"] == run[1] and status["state"] != "estimating",
-                                       self.timeout, f"finish estimate run {run[1]}", progress)
+        status = self._wait_for_status(
+            lambda status: status["run_id"] == run[1] and status["state"] not in RUNNING_STATES,
+            self.timeout, f"finish estimate run {run[1]}", progress)
         if status["state"] == "failed" or status["last_error"]:
             raise ReplayError(f"the estimator node's run {run[1]} failed: {status['last_error'] or status['model']}")
         anchor_stamp = _stamp_ns(messages[0].header.stamp)

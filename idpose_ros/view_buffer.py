@@ -1,15 +1,17 @@
-"""The estimator's view buffer: decoded images kept in capture order, the first one the anchor.
+"""The estimator's view buffer: decoded views kept in capture order (the first one the anchor) and the latest image.
 
 Thread-safe, because image callbacks, services and the estimation worker all touch it.
 """
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from builtin_interfaces.msg import Time
 
 from idpose_core.pipeline import ViewInput
+from idpose_ros.raw_image import RawImage
 
 
 @dataclass(frozen=True)
@@ -26,14 +28,22 @@ class CaptureRefused(Exception):
     """A view could not be kept; the message says why (buffer full, no new image, ...)."""
 
 
+class ImageRefused(CaptureRefused):
+    """The image itself cannot be a view (unreadable, too large, implausible); the message names it and why."""
+
+
 class ViewBuffer:
-    """Bounded list of kept views plus the latest image seen, for `auto` and `on_request` capture."""
+    """Bounded list of kept views plus the latest image message seen, not decoded yet.
+
+    Both capture modes keep a view the same way, ``keep_latest``: the latest message is handed out
+    once, decoded and checked, and kept. ``auto`` asks ``due`` first; ``on_request`` does it on ``~/capture``.
+    """
 
     def __init__(self, max_views: int) -> None:
         self._lock = threading.Lock()
         self._views: list[View] = []
         self._max_views = max_views
-        self._latest: View | None = None
+        self._latest: RawImage | None = None
         self._last_kept_at: float | None = None
 
     def __len__(self) -> int:
@@ -50,34 +60,43 @@ class ViewBuffer:
         with self._lock:
             self._max_views = value
 
-    def observe(self, view: View) -> None:
-        """Remember the newest image for an `on_request` capture."""
+    def observe(self, image: RawImage) -> None:
+        """Remember the newest image message (the previous one is dropped undecoded)."""
         with self._lock:
-            self._latest = view
+            self._latest = image
 
-    def keep_if_due(self, view: View, now: float, min_interval: float) -> int | None:
-        """`auto` capture: keep ``view`` when ``min_interval`` s have passed since the last kept one.
-
-        Returns the new number of views, or None when the view was not due. Raises
-        ``CaptureRefused`` when it was due but the buffer is full.
-        """
+    def due(self, now: float, min_interval: float) -> bool:
+        """`auto` capture: whether ``min_interval`` s have passed since the last kept view."""
         with self._lock:
-            self._latest = view
-            if self._last_kept_at is not None and now - self._last_kept_at < min_interval:
-                return None
-            count = self._append(view, now)
-            self._latest = None  # a later ~/capture must not keep the same image twice
-            return count
+            return self._last_kept_at is None or now - self._last_kept_at >= min_interval
 
-    def capture_latest(self, now: float) -> tuple[View, int]:
-        """`on_request` capture: keep the newest image seen; returns it and the new number of views."""
+    def _take_latest(self) -> RawImage:
+        """The newest image message, handed out once; ``CaptureRefused`` when the buffer is full or none came."""
         with self._lock:
+            self._check_room()
             if self._latest is None:
                 raise CaptureRefused("no new image received since the last capture")
-            view = self._latest
-            count = self._append(view, now)
-            self._latest = None
-            return view, count
+            image, self._latest = self._latest, None
+            return image
+
+    def _keep(self, view: View, now: float) -> int:
+        """Append a decoded view; returns the new number of views (``CaptureRefused`` when full)."""
+        with self._lock:
+            self._check_room()
+            self._views.append(view)
+            self._last_kept_at = now
+            return len(self._views)
+
+    def keep_latest(self, prepare: Callable[[RawImage], View], now: float) -> tuple[View, int]:
+        """Take the newest message, ``prepare`` it into a view (decode and check; it raises ``ImageRefused``
+        for an image that cannot be one) and keep it; returns the view and the new number of views."""
+        view = prepare(self._take_latest())
+        return view, self._keep(view, now)
+
+    def anchor(self) -> View | None:
+        """The first kept view, None while the buffer is empty."""
+        with self._lock:
+            return self._views[0] if self._views else None
 
     def snapshot(self) -> list[View]:
         """The kept views in capture order (a copy: the buffer may change while an estimate runs)."""
@@ -93,9 +112,6 @@ class ViewBuffer:
             self._last_kept_at = None
             return dropped
 
-    def _append(self, view: View, now: float) -> int:
+    def _check_room(self) -> None:
         if len(self._views) >= self._max_views:
             raise CaptureRefused(f"the buffer is full ({self._max_views} views, max_views); call ~/reset first")
-        self._views.append(view)
-        self._last_kept_at = now
-        return len(self._views)

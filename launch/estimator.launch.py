@@ -5,7 +5,15 @@
 ``image_topic`` remaps the node's ``image`` subscription and ``image/compressed`` to
 ``<image_topic>/compressed`` (image_transport's naming); a non-empty ``model_path`` overrides the
 one in ``params_file`` (default: the installed config/estimator.yaml).
+
+The node gets the Fast DDS profile config/fastdds_large_images.xml (a 32 MB shared-memory segment,
+UDP kept for other hosts), without which most raw HD frames are lost on the way (README, "The
+estimator node"), unless FASTRTPS_DEFAULT_PROFILES_FILE is set already (a profile of your own, or
+empty to keep Fast DDS's defaults) or another RMW than Fast DDS is chosen. Start the camera driver
+with the same variable: the publisher's segment is the one that counts.
 """
+import os
+
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
@@ -15,6 +23,16 @@ from launch_ros.substitutions import FindPackageShare
 from launch import LaunchContext, LaunchDescription
 
 PACKAGE = "idpose_ros"
+PROFILE_VARIABLE = "FASTRTPS_DEFAULT_PROFILES_FILE"  # read by Fast DDS 2.x, the RMW of ROS 2 Jazzy
+LARGE_IMAGES_PROFILE = "fastdds_large_images.xml"
+
+
+def transport_environment(context: LaunchContext) -> dict[str, str]:
+    """The large-image profile for the node's process, where it is safe: Fast DDS, no profile chosen already."""
+    if PROFILE_VARIABLE in os.environ or os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
+        return {}
+    return {PROFILE_VARIABLE: PathJoinSubstitution([FindPackageShare(PACKAGE), "config", LARGE_IMAGES_PROFILE])
+            .perform(context)}
 
 
 def estimator_node(context: LaunchContext) -> list[Node]:
@@ -30,6 +48,7 @@ def estimator_node(context: LaunchContext) -> list[Node]:
         emulate_tty=True,
         parameters=[LaunchConfiguration("params_file"), *overrides],
         remappings=[("image", image_topic), ("image/compressed", [image_topic, "/compressed"])],
+        additional_env=transport_environment(context),
     )]
 
 

@@ -9,6 +9,7 @@ from msg_adapters.compressed import compressed_to_rgb
 from msg_adapters.depth import depth_to_image, image_to_depth, image_to_mask
 from msg_adapters.encodings import Encoding, lookup_encoding
 from msg_adapters.errors import AdapterError
+from msg_adapters.image_size import ImageTooLarge, encoded_size
 from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
 from msg_adapters.markers import camera_markers
 from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_array
@@ -17,11 +18,13 @@ from msg_adapters.sensors import camera_info_intrinsics, imu_acceleration, orien
 __all__ = [
     "AdapterError",
     "Encoding",
+    "ImageTooLarge",
     "array_to_image",
     "camera_info_intrinsics",
     "camera_markers",
     "compressed_to_rgb",
     "depth_to_image",
+    "encoded_size",
     "image_to_array",
     "image_to_depth",
     "image_to_mask",

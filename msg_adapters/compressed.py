@@ -6,6 +6,7 @@ import numpy as np
 from sensor_msgs.msg import CompressedImage
 
 from msg_adapters.errors import AdapterError
+from msg_adapters.image_size import check_pixels, encoded_size
 from msg_adapters.rgb import pixels_to_rgb
 
 _CODECS = {"jpeg": "jpeg", "jpg": "jpeg", "png": "png", "tiff": "tiff", "tif": "tiff"}
@@ -32,15 +33,19 @@ def compression_codec(format_string: str) -> str | None:
     return codecs.pop()
 
 
-def compressed_to_rgb(msg: CompressedImage) -> tuple[np.ndarray, np.ndarray | None]:
+def compressed_to_rgb(msg: CompressedImage, max_pixels: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """(RGB uint8 (H, W, 3), alpha uint8 (H, W) or None) decoded by OpenCV.
 
     png and tiff keep alpha and 16-bit depth (scaled by 255/65535); an empty format is sniffed.
+    With ``max_pixels``, the size is read from the png/jpeg/tiff header first and a larger image
+    raises ``ImageTooLarge`` before anything is decoded.
     """
     codec = compression_codec(msg.format)
     data = np.frombuffer(msg.data, dtype=np.uint8)
     if data.size == 0:
         raise AdapterError("CompressedImage.data is empty; expected an encoded jpeg/png/tiff image")
+    if max_pixels is not None:
+        check_pixels(*encoded_size(data.tobytes()), max_pixels, "CompressedImage")
     flags = cv2.IMREAD_COLOR if codec == "jpeg" else cv2.IMREAD_UNCHANGED
     try:
         pixels = cv2.imdecode(data, flags)

@@ -7,17 +7,20 @@ from std_msgs.msg import Header
 
 from msg_adapters.encodings import check_size, lookup_encoding
 from msg_adapters.errors import AdapterError
+from msg_adapters.image_size import check_pixels
 from msg_adapters.rgb import pixels_to_rgb
 
 
-def image_to_array(msg: Image) -> np.ndarray:
+def image_to_array(msg: Image, max_pixels: int | None = None) -> np.ndarray:
     """The pixels of `msg` as a fresh (H, W) or (H, W, C) array of the encoding's dtype, native byte order.
 
-    Always a copy: rclpy may reuse the message buffer after the callback returns.
+    Always a copy: rclpy may reuse the message buffer after the callback returns. More than
+    ``max_pixels`` pixels raise ``ImageTooLarge`` before ``data`` is touched.
     """
     encoding = lookup_encoding(msg.encoding)
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
     check_size(encoding, height, width, "Image")
+    check_pixels(width, height, max_pixels, "Image")
     row_bytes = width * encoding.pixel_bytes
     if step < row_bytes:
         raise AdapterError(
@@ -68,10 +71,11 @@ def array_to_image(arr: np.ndarray, encoding: str, header: Header | None = None)
     )
 
 
-def image_to_rgb(msg: Image) -> tuple[np.ndarray, np.ndarray | None]:
+def image_to_rgb(msg: Image, max_pixels: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """(RGB uint8 (H, W, 3), alpha uint8 (H, W) or None) from any supported encoding.
 
     Bayer and YUV are converted by OpenCV; 16-bit values scale by 255/65535, floats from [0, 1].
+    More than ``max_pixels`` pixels raise ``ImageTooLarge`` before anything is read.
     """
     encoding = lookup_encoding(msg.encoding)
-    return pixels_to_rgb(image_to_array(msg), encoding.layout, f"Image encoding {encoding.name!r}")
+    return pixels_to_rgb(image_to_array(msg, max_pixels), encoding.layout, f"Image encoding {encoding.name!r}")

@@ -106,6 +106,28 @@ def object_views() -> list[tuple[Any, Any]]:
                                   for polar, azimuth in ((80, 0), (85, 90), (70, 200), (95, 300)))]
 
 
+def png_chunk(kind: bytes, body: bytes) -> bytes:
+    """One png chunk: length, type, body, CRC."""
+    import struct
+    import zlib
+
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+
+@pytest.fixture(scope="session")
+def png_bomb() -> bytes:
+    """A valid 140 KB grey png that decodes to 12000 x 12000 pixels (144 MB grey, 432 MB as RGB)."""
+    import struct
+    import zlib
+
+    side, rows_per_block = 12000, 500
+    compressor = zlib.compressobj(9)
+    block = bytes((side + 1) * rows_per_block)  # each row: filter byte 0, then black pixels
+    data = b"".join(compressor.compress(block) for _ in range(side // rows_per_block)) + compressor.flush()
+    header = struct.pack(">IIBBBBB", side, side, 8, 0, 0, 0, 0)  # 8-bit greyscale, no interlace
+    return b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", header) + png_chunk(b"IDAT", data) + png_chunk(b"IEND", b"")
+
+
 @pytest.fixture(scope="session")
 def errors_of() -> Callable[[Any], Any]:
     """noise_error of a predictor on fixed inputs: equal outputs mean equal weights and conditioning."""

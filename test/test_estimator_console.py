@@ -1,12 +1,15 @@
 """`ros2 run idpose_ros estimator` as a user runs it: the colcon-installed console script, in a subprocess.
 
 The node comes up from install/ (after sourcing install/setup.sh), refuses ~/estimate without
-views, starts an estimate on two views, and a Ctrl-C (SIGINT) in the middle of it ends the
-process cleanly within 2 s. The README's walk-through script, run as written, gets the poses from
-it. Reduced: the tiny random Zero-1-to-3 on 32 px views, 2 azimuth candidates, probe batch 1, no
-adjustment steps, 2 refinement and 1 runner-up steps per view (endless refinement, 10^6 steps, where
-the SIGINT must land during the run); torch on one thread (test/conftest.py).
+views, starts an estimate on two views, and a Ctrl-C (SIGINT) in the middle of it, while a camera
+streams raw 1080p frames that the node keeps decoding, stops the estimate within 0.5 s and ends the
+process cleanly within 2 s; invalid start-up parameters are FATAL under the node's full name. The
+README's walk-through script, run as written, gets the poses from it. Reduced: the tiny random
+Zero-1-to-3 on 32 px views, 2 azimuth candidates, probe batch 1, no adjustment steps, 2 refinement
+and 1 runner-up steps per view (endless refinement, 10^6 steps, where the SIGINT must land during
+the run); torch on one thread (test/conftest.py).
 """
+import os
 import re
 import signal
 import subprocess
@@ -30,6 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 NAMESPACE = "/console"
 NODE = f"{NAMESPACE}/idpose_estimator"
 SHUTDOWN_LIMIT = 2.0  # seconds: Ctrl-C during an estimate must end the node within this
+CANCEL_LIMIT = 0.5  # seconds from Ctrl-C until the running estimate has stopped
+VIEW_INTERVAL = 0.25  # s, min_view_interval while a camera streams
+LARGE_IMAGES = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(ROOT / "config" / "fastdds_large_images.xml")}  # as launched
 FAST = {"image_size": 32, "azimuth_candidates": 2, "probe_batch": 1, "adjust_steps": 0, "keep_top": 1,
         "refine_steps_per_view": 2, "average_last": 1, "runner_up_steps": 1}
 
@@ -39,17 +45,20 @@ def in_workspace(workspace: Path, command: str) -> list[str]:
     return ["bash", "-c", f". {workspace / 'install' / 'setup.sh'} && exec {command}"]
 
 
-def start_estimator(workspace: Path, namespace: str, parameters: dict, log: Path) -> subprocess.Popen:
+def start_estimator(workspace: Path, namespace: str, parameters: dict, log: Path,
+                    environment: dict[str, str] | None = None) -> subprocess.Popen:
     """The installed `estimator` executable (what `ros2 run idpose_ros estimator` runs), output to ``log``."""
     executable = workspace / "install" / "idpose_ros" / "lib" / "idpose_ros" / "estimator"
     arguments = " ".join(f"-p {name}:={value}" for name, value in parameters.items())
     with log.open("w") as output:
         return subprocess.Popen(in_workspace(workspace, f"{executable} --ros-args -r __ns:={namespace} {arguments}"),
-                                stdout=output, stderr=subprocess.STDOUT)
+                                stdout=output, stderr=subprocess.STDOUT, env={**os.environ, **(environment or {})})
 
 
-def stop(process: subprocess.Popen, log: Path) -> float:
-    """SIGINT, then the seconds until the process exited; fails past SHUTDOWN_LIMIT or on a non-zero code."""
+def stop(process: subprocess.Popen, log: Path) -> tuple[float, float]:
+    """SIGINT, then (its wall-clock time, the seconds until the process exited); fails past SHUTDOWN_LIMIT or on a
+    non-zero code."""
+    signalled = time.time()
     process.send_signal(signal.SIGINT)
     interrupted = time.monotonic()
     try:
@@ -57,19 +66,34 @@ def stop(process: subprocess.Popen, log: Path) -> float:
     except subprocess.TimeoutExpired:
         raise AssertionError(f"no exit within {SHUTDOWN_LIMIT} s of SIGINT:\n{log.read_text()}") from None
     assert code == 0, log.read_text()
-    return time.monotonic() - interrupted
+    return signalled, time.monotonic() - interrupted
 
 
-def test_the_installed_estimator_refuses_without_views_and_stops_on_ctrl_c_mid_estimate(
-        workspace, tiny_model_dir, ros_context, object_views, wait_for, tmp_path):
+def logged_at(log: Path, text: str) -> float:
+    """The wall-clock time rcutils stamped on the first log line containing ``text``."""
+    for line in log.read_text().splitlines():
+        if text in line:
+            return float(re.search(r"\[(\d+\.\d+)\]", line).group(1))
+    raise AssertionError(f"no log line with {text!r}:\n{log.read_text()}")
+
+
+def test_the_installed_estimator_stops_on_ctrl_c_mid_estimate_under_an_hd_stream(
+        workspace, ros_context, object_views, wait_for, tmp_path):
+    """Ctrl-C while the solver runs and a camera streams 1080p rgb8 at 30 Hz that the node keeps decoding
+    (auto capture every 0.25 s): the estimate stops within CANCEL_LIMIT and the node exits within 2 s.
+
+    The embedded demo model in its exploration stage (32 azimuth candidates, so that it lasts): one probe
+    call of 64 samples takes seconds on a 2-core CPU, so the cancel has to land inside a model call.
+    """
     log = tmp_path / "estimator.log"
     process = start_estimator(workspace, NAMESPACE, {
-        **FAST, "model_path": tiny_model_dir, "min_view_interval": 0.0, "diagnostics_period": 0.1,
-        "refine_steps_per_view": 1_000_000}, log)
+        "min_view_interval": VIEW_INTERVAL, "diagnostics_period": 0.1, "azimuth_candidates": 32,
+        "refine_steps_per_view": 1_000_000, "max_views": 64}, log, LARGE_IMAGES)
     probe = Node("console_probe", context=ros_context)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(probe)
     status: dict[str, str] = {}
+    streaming: subprocess.Popen | None = None
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for entry in msg.status:
@@ -98,20 +122,46 @@ def test_the_installed_estimator_refuses_without_views_and_stops_on_ctrl_c_mid_e
 
         spin_until(lambda: images.get_subscription_count() > 0, "the node's image subscription")
         for index, (rgb, alpha) in enumerate(object_views[:2]):
-            images.publish(array_to_image(np.dstack([rgb, alpha]), "rgba8", Header(frame_id=f"cam{index}")))
+            time.sleep(VIEW_INTERVAL)  # so that the view is due (auto capture)
+            images.publish(array_to_image(np.dstack([rgb, alpha]), "rgba8", Header(frame_id="camera_optical")))
             spin_until(lambda count=index + 1: status.get("views_buffered") == str(count),
                        f"view {index + 1} to be buffered")
         assert call("estimate").success
-        spin_until(lambda: status.get("stage") == "refinement", "the estimate to reach refinement")
+        spin_until(lambda: status.get("stage") == "exploration", "the estimate to reach exploration")
 
-        print(f"estimator exited {stop(process, log):.2f} s after SIGINT")
+        streaming = subprocess.Popen(
+            [sys.executable, str(ROOT / "bench" / "image_transport.py"), "--role", "publish", "--payload",
+             "rgb8 1920x1080", "--topic", f"{NAMESPACE}/image", "--seconds", "30", "--rate", "30"],
+            cwd=ROOT, env={**os.environ, **LARGE_IMAGES}, stdout=subprocess.DEVNULL)
+        spin_until(lambda: int(status.get("images_received", "0")) >= 60 and int(status["views_buffered"]) >= 6
+                   and status["stage"] == "exploration", "2 s of 1080p frames, decoded and kept as views during the "
+                   "exploration", timeout=60.0)
+        frames = int(status["images_received"])
+
+        stage = status["stage"]
+        signalled, seconds = stop(process, log)
+        cancelled = logged_at(log, "cancelled by shutdown") - signalled
+        print(f"under a 1080p stream ({frames} frames received, {status['views_buffered']} views kept), in the "
+              f"{stage} stage: the estimate stopped {cancelled:.2f} s after SIGINT, the estimator exited after "
+              f"{seconds:.2f} s")
         assert "shutting down: cancelling the running estimate" in log.read_text()
+        assert "did not stop in time" not in log.read_text()
+        assert cancelled < CANCEL_LIMIT, f"the estimate stopped {cancelled:.2f} s after SIGINT"
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
+        for child in (process, streaming):
+            if child is not None and child.poll() is None:
+                child.kill()
+                child.wait()
         executor.shutdown()
         probe.destroy_node()
+
+
+def test_invalid_start_up_parameters_are_fatal_under_the_node_s_full_name(workspace, tmp_path):
+    log = tmp_path / "estimator.log"
+    process = start_estimator(workspace, "/some/robot", {"variant": "best"}, log)
+    assert process.wait(timeout=60) == 2, log.read_text()
+    (fatal,) = [line for line in log.read_text().splitlines() if "[FATAL]" in line]
+    assert "[some.robot.idpose_estimator]: invalid parameters:" in fatal and "variant must be one of" in fatal
 
 
 def readme_walk_through_script() -> str:
@@ -138,7 +188,7 @@ def test_the_readme_walk_through_script_gets_the_poses(workspace, tiny_model_dir
         assert result.returncode == 0, result.stderr + log.read_text()
         lines = result.stdout.splitlines()
         assert lines[:4] == [f"0{k}.png -> captured view {k + 1} (Image bgra8)" for k in range(3)] + [
-            "estimating the poses of 3 views"]
+            "estimating the poses of 3 views (run 1)"]
         assert lines[4] == "view 0: position (0.000, 0.000, 0.000) m, quaternion (0.000, 0.000, 0.000, 1.000)"
         assert [line.split(":")[0] for line in lines[5:]] == ["view 1", "view 2"]
     finally:

@@ -15,10 +15,16 @@ def values(status: EstimatorStatus) -> tuple[DiagnosticStatus, dict[str, str]]:
 
 def test_an_estimate_in_progress_reports_stage_and_percent():
     entry, kv = values(EstimatorStatus(state="estimating", run_id=4, views_buffered=3, max_views=8, model="loaded",
-                                       stage="refine", progress_percent=42.25))
+                                       stage="refine", progress_percent=42.25, images_received=310))
     assert entry.level == DiagnosticStatus.OK and entry.message == "estimating: refine 42 %"
     assert (kv["state"], kv["run_id"], kv["stage"], kv["progress_percent"], kv["views_buffered"],
-            kv["max_views"]) == ("estimating", "4", "refine", "42.2", "3", "8")
+            kv["max_views"], kv["images_received"]) == ("estimating", "4", "refine", "42.2", "3", "8", "310")
+
+
+def test_a_cancelled_estimate_that_is_still_stopping_is_not_an_error():
+    entry, kv = values(EstimatorStatus(state="cancelling", run_id=2, views_buffered=0, max_views=8, model="loaded"))
+    assert entry.level == DiagnosticStatus.OK and entry.message == "cancelling, 0 views buffered"
+    assert kv["state"] == "cancelling" and kv["run_id"] == "2"
 
 
 def test_a_finished_run_reports_time_and_per_view_scores():

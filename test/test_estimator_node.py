@@ -161,7 +161,10 @@ def test_views_in_several_encodings_give_a_pose_array_in_the_anchor_frame(harnes
     h.send_view(messages[2])
     h.send_view(messages[3])
     assert h.node.status().views_buffered == 4
-    wait_for(lambda: h.logged("dropped a malformed message"), "the malformed-message warning on /rosout")
+    reasons = ("refused Image rgb8 on image: Image.data has 10 bytes", "encoding 'no_such_encoding' is not supported",
+               "refused CompressedImage png on image/compressed: CompressedImage.data (16 bytes) is not a png")
+    wait_for(lambda: any(reason in line for line in h.logged("refused") for reason in reasons),
+             "the malformed-message warning on /rosout (one line per 5 s: whichever came first)")
 
     started = h.call("estimate")
     assert started.success and started.message == "estimating the poses of 4 views (run 1)"
@@ -208,9 +211,10 @@ def test_cancel_and_reset_during_a_run(harness, object_views, wait_for):
     busy = h.call("estimate")
     assert not busy.success and "busy" in busy.message
     cancelled = h.call("cancel")
-    assert cancelled.success and "2 views stay buffered" in cancelled.message
+    assert cancelled.success and cancelled.message == "cancelling the estimate (run 1); the 2 views stay buffered"
     wait_for(lambda: h.state() == "idle", "the cancelled run to stop", timeout=10.0)
     assert h.node.status().last_error == "cancelled" and h.node.status().views_buffered == 2
+    wait_for(lambda: h.logged("cancelled by ~/cancel; the 2 buffered views stay for a retry"), "the cancel log line")
 
     retry = h.call("estimate")
     assert retry.success and retry.message.endswith("(run 2)"), "a cancelled estimate leaves the buffer for a retry"
@@ -218,9 +222,12 @@ def test_cancel_and_reset_during_a_run(harness, object_views, wait_for):
     wait_for(lambda: h.node.status().stage == "refinement", "the refinement stage")
     reset = h.call("reset")
     assert reset.success and reset.message == "dropped 2 views (cancelled the running estimate)"
-    assert h.node.status().views_buffered == 0 and h.state() == "idle"
+    assert h.node.status().views_buffered == 0, "~/reset answers at once, without waiting for the worker"
     assert h.call("estimate").message == "need at least 2 buffered views to estimate, have 0"
-    time.sleep(0.3)
+    wait_for(lambda: h.logged("(run 2) stopped"), "the cancelled run to stop", timeout=10.0)
+    (stopped,) = h.logged("(run 2) stopped")
+    assert stopped.endswith("cancelled by ~/reset; its views were dropped") and not h.logged("views are kept")
+    wait_for(lambda: h.state() == "idle", "the idle state")
     assert h.poses == [], "a cancelled estimate publishes nothing"
 
 
@@ -279,3 +286,57 @@ def test_an_invalid_start_up_parameter_is_refused_with_its_reason(ros_context):
     with pytest.raises(InvalidParameterValueException, match="variant must be one of full, tr, naive"):
         EstimatorNode(context=ros_context, namespace="/bad_start",
                       parameter_overrides=[Parameter("variant", value="best")])
+
+
+def test_on_request_capture_decodes_only_the_image_it_keeps_and_refuses_a_bad_one(harness, object_views, png_bomb):
+    h = harness(capture_mode="on_request")
+    (rgb, alpha) = object_views[0]
+    bomb = CompressedImage(header=header("cam", 1), format="png", data=png_bomb)
+    noise = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    speck = np.dstack([rgb, np.where(np.arange(64)[:, None] + np.arange(64) < 6, 255, 0).astype(np.uint8)])
+
+    def latest(msg: Image | CompressedImage) -> Trigger.Response:
+        """Publish one image, wait until the node has it, and ask ~/capture to keep it."""
+        received = h.node.status().images_received
+        h.send(msg)
+        h.wait_for(lambda: h.node.status().images_received == received + 1, "the image to arrive")
+        return h.call("capture")
+
+    refused = latest(bomb)
+    assert not refused.success and refused.message == (
+        "CompressedImage png on image/compressed: CompressedImage is 12000x12000 = 144000000 pixels, more than the "
+        "limit of 16777216; refused before decoding (max_image_pixels)")
+    h.wait_for(lambda: h.logged("~/capture refused CompressedImage png on image/compressed: CompressedImage is "
+                                "12000x12000"), "the refusal on /rosout")
+    for bad, reason in ((array_to_image(rgb[:8, :8].copy(), "rgb8", header("cam", 2)),
+                         "Image rgb8 on image is 8x8 px, too small (at least 32 px a side)"),
+                        (array_to_image(speck, "rgba8", header("cam", 3)),
+                         "Image rgba8 on image: the object (alpha mask) is only 6x6 px, too small to compare")):
+        answer = latest(bad)
+        assert not answer.success and answer.message.startswith(reason), answer.message
+    assert h.node.status().views_buffered == 0
+
+    received = h.node.status().images_received
+    for _ in range(5):  # a stream: only the latest message is decoded, and only on ~/capture
+        h.send(bomb)
+    h.wait_for(lambda: h.node.status().images_received == received + 5, "the stream to arrive")
+    kept = latest(array_to_image(np.dstack([rgb, alpha]), "rgba8", header("cam", 4)))
+    assert kept.success and kept.message == "captured view 1 (Image rgba8)"
+    assert latest(array_to_image(noise, "rgb8", header("cam", 5))).success, "noise has no alpha: checked later"
+    assert h.call("estimate").success
+    h.wait_for(lambda: h.state() == "failed", "the estimate to refuse the noise view")
+    assert h.node.status().last_error == "PreprocessingError: view 1: no object found (empty grabcut mask)"
+    assert h.node.status().views_buffered == 2 and h.poses == []
+
+
+def test_views_from_two_frames_are_flagged_and_an_empty_anchor_frame_falls_back(harness, object_views):
+    h = harness()
+    (rgb0, alpha0), (rgb1, alpha1) = object_views[:2]
+    h.send_view(array_to_image(np.dstack([rgb0, alpha0]), "rgba8", header("", 1)))
+    h.send_view(array_to_image(np.dstack([rgb1, alpha1]), "rgba8", header("other_camera", 2)))
+    h.wait_for(lambda: h.logged("view 2 is in frame 'other_camera' but the anchor in ''"), "the mixed-frame warning")
+    assert h.call("estimate").success
+    (poses,) = h.wait_for(lambda: h.poses, "the PoseArray")
+    assert poses.header.frame_id == "idpose_anchor"
+    assert h.logged("the anchor image has no header.frame_id and anchor_frame is not set: publishing the poses in "
+                    "frame 'idpose_anchor'")

@@ -5,7 +5,13 @@ import cv2
 import numpy as np
 import pytest
 
-from idpose_core.preprocessing import PreprocessingError, bounding_box, preprocess_views
+from idpose_core.preprocessing import (
+    MIN_IMAGE_SIDE,
+    PreprocessingError,
+    bounding_box,
+    precheck_view,
+    preprocess_views,
+)
 from idpose_core.view_input import ViewInput
 
 
@@ -159,3 +165,40 @@ def test_empty_masks_name_the_view():
 def test_malformed_input_is_rejected(rgbs, alphas, message):
     with pytest.raises(PreprocessingError, match=message):
         prep(rgbs, alphas)
+
+
+def square_on_white(side: int, square: int) -> np.ndarray:
+    rgb = np.full((side, side, 3), 255, dtype=np.uint8)
+    start = (side - square) // 2
+    rgb[start:start + square, start:start + square] = (30, 90, 200)
+    return rgb
+
+
+@pytest.mark.parametrize("size", [64, 256, 480])
+def test_pure_noise_has_no_object(size):
+    noise = np.random.default_rng(size).integers(0, 256, (size, size, 3), dtype=np.uint8)
+    with pytest.raises(PreprocessingError, match=r"view 1: no object found \(empty grabcut mask\)"):
+        prep([square_on_white(64, 30), noise], [None, None])
+
+
+@pytest.mark.parametrize("rgb, alpha, message", [
+    (square_on_white(8, 4), None, r"view 0 is 8x8 px, too small \(at least 32 px a side\)"),
+    (square_on_white(64, 10), None, r"view 0: the object \(threshold mask\) is only 10x10 px, too small"),
+    (square_on_white(64, 30), np.pad(np.full((62, 62), 255, np.uint8), 1),
+     r"view 0: the alpha mask covers 94% of the frame \(at most 90%\): no object separated"),
+], ids=["8x8-image", "speck", "whole-frame"])
+def test_implausible_views_are_refused_with_the_reason(rgb, alpha, message):
+    with pytest.raises(PreprocessingError, match=message):
+        prep([rgb], [alpha])
+
+
+def test_the_cheap_precheck_refuses_what_needs_no_computed_mask():
+    precheck_view(ViewInput(square_on_white(MIN_IMAGE_SIDE, 16)), "the image")  # smallest plausible view
+    with pytest.raises(PreprocessingError, match="the image is 31x31 px, too small"):
+        precheck_view(ViewInput(square_on_white(MIN_IMAGE_SIDE - 1, 16)), "the image")
+    speck = np.zeros((64, 64), np.uint8)
+    speck[30:35, 30:35] = 255
+    with pytest.raises(PreprocessingError, match=r"the image: the object \(alpha mask\) is only 5x5 px"):
+        precheck_view(ViewInput(square_on_white(64, 30), speck), "the image")
+    noise = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    precheck_view(ViewInput(noise), "the image")  # without alpha the mask is computed later, by preprocess_views

@@ -3,8 +3,12 @@
 Reduced: the tiny random model (Zero123Config.tiny) stands in for the released weights.
 """
 import argparse
+import io
 import json
+import pickle
+import random
 import shutil
+import zipfile
 
 import pytest
 import torch
@@ -140,10 +144,113 @@ def test_parts_that_do_not_fit_together(copy):
     expect_error(copy, "in_channels 4 != 2 x vae latent_channels 4")
 
 
+class Payload:
+    """Unpickled, it would create ``marker``: proof that a refused pickle never ran."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return open, (str(self.marker), "w")
+
+
+def text(name):
+    def make(tmp_path, saved):
+        (tmp_path / name).write_text("<html><body>404 Not Found</body></html>\n")
+        return tmp_path / name
+    return make
+
+
+def write(name, content):
+    def make(tmp_path, saved):
+        (tmp_path / name).write_bytes(content(tmp_path, saved))
+        return tmp_path / name
+    return make
+
+
+def saved_bytes(tmp_path, state, keep, **options):
+    """The bytes of ``torch.save(state, **options)`` cut to the share ``keep`` of their length."""
+    torch.save(state, tmp_path / "whole.ckpt", **options)
+    data = (tmp_path / "whole.ckpt").read_bytes()
+    return data[: int(len(data) * keep)]
+
+
+def folder(damage):
+    def make(tmp_path, saved):
+        damage(shutil.copytree(saved, tmp_path / "model"))
+        return tmp_path / "model"
+    return make
+
+
+def cut_in_half(file):
+    file.write_bytes(file.read_bytes()[: file.stat().st_size // 2])
+
+
+BROKEN_MODEL_PATHS = {
+    "text file as .ckpt": (text("zero123.ckpt"), ["a text file, not a checkpoint", "404 Not Found"]),
+    "text file as .safetensors": (text("zero123.safetensors"), ["a text file, not a checkpoint"]),
+    "text file as .pth": (text("zero123.pth"), ["a text file, not a checkpoint"]),
+    "Git LFS pointer": (write("105000.ckpt", lambda *_: b"version https://git-lfs.github.com/spec/v1\noid sha256:ab\n"),
+                        ["a Git LFS pointer, not the weights", "git lfs pull"]),
+    "random bytes": (write("zero123.ckpt", lambda *_: b"\x13" + random.Random(0).randbytes(4095)),
+                     ["not a weight file: neither a PyTorch checkpoint (zip or pickle) nor safetensors"]),
+    "empty file": (write("zero123.ckpt", lambda *_: b""), ["an empty file (0 bytes)"]),
+    "truncated zip checkpoint": (
+        write("zero123.ckpt", lambda tmp, _: saved_bytes(tmp, {"state_dict": {"w": torch.zeros(4096)}}, 0.5)),
+        ["truncated or damaged: a zip archive", "interrupted download"]),
+    "truncated legacy checkpoint": (
+        write("zero123.ckpt", lambda tmp, _: saved_bytes(tmp, {"state_dict": {"w": torch.zeros(4096)}}, 0.5,
+                                                         _use_new_zipfile_serialization=False)), ["truncated"]),
+    "truncated safetensors": (
+        write("zero123.safetensors", lambda tmp, saved: (saved / "vae" / "diffusion_pytorch_model.safetensors")
+              .read_bytes()[:100_000]), ["truncated: its header lists"]),
+    "zip that is not a checkpoint": (
+        write("zero123.ckpt", lambda tmp, _: zipped({"readme.txt": "weights elsewhere"})),
+        ["a zip archive but not a PyTorch checkpoint"]),
+    "pickle with a payload": (
+        write("zero123.ckpt", lambda tmp, _: pickle.dumps({"state_dict": Payload(tmp / "pwned")}, protocol=2)),
+        ["unsafe pickle", "refused io.open"]),
+    "zip checkpoint with a payload": (
+        write("zero123.pth", lambda tmp, _: torch_saved({"state_dict": Payload(tmp / "pwned")}, tmp)),
+        ["unsafe pickle", "refused io.open"]),
+    "empty folder": (lambda tmp, _: tmp, ["missing part(s) unet, vae, image_encoder, cc_projection"]),
+    "folder with one part missing": (folder(lambda root: shutil.rmtree(root / "image_encoder")),
+                                     ["missing part(s) image_encoder"]),
+    "folder with a truncated part": (
+        folder(lambda root: cut_in_half(root / "unet" / "diffusion_pytorch_model.safetensors")),
+        ["part 'unet'", "is truncated"]),
+    "folder with a text file as a part's weights": (
+        folder(lambda root: (root / "image_encoder" / "model.safetensors").write_text("oops")),
+        ["part 'image_encoder'", "model.safetensors is a text file"]),
+}
+
+
+def zipped(entries):
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        for name, content in entries.items():
+            archive.writestr(name, content)
+    return buffer.getvalue()
+
+
+def torch_saved(obj, tmp_path):
+    torch.save(obj, tmp_path / "saved.pth")
+    return (tmp_path / "saved.pth").read_bytes()
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN_MODEL_PATHS))
+def test_every_broken_model_path_gives_one_error_naming_the_problem(case, saved, tmp_path):
+    make, fragments = BROKEN_MODEL_PATHS[case]
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    expect_error(make(scratch, saved), *fragments)
+    assert not (scratch / "pwned").exists(), "a refused pickle must never run"
+
+
 def test_checkpoint_that_needs_code_execution(tmp_path):
     file = tmp_path / "zero123.ckpt"
     torch.save({"state_dict": {"cc_projection.weight": torch.zeros(2, 2)}, "hparams": argparse.Namespace(lr=1)}, file)
-    expect_error(file, "pickled Python objects", "weights_only")
+    expect_error(file, "unsafe pickle", "pickled Python objects", "refused argparse.Namespace")
 
 
 def test_checkpoint_without_zero123_parts(tmp_path):

@@ -7,9 +7,9 @@ from collections.abc import Callable
 
 import torch
 
+from idpose_core.cancellation import raise_if_cancelled
 from idpose_core.predictor import NoisePredictor, Views
 from idpose_core.solver.config import SolverConfig
-from idpose_core.solver.errors import Cancelled
 from idpose_core.spherical import invert
 
 # progress(stage, done, total): samples of the current stage evaluated so far, and its total.
@@ -56,6 +56,11 @@ class SolverContext:
         """Predictor samples differentiated so far, over all stages."""
         return sum(differentiated for _, differentiated in self.stage_samples.values())
 
+    @property
+    def stage(self) -> str:
+        """The stage being computed ("setup" before the first one)."""
+        return self._stage or "setup"
+
     def begin_stage(self, stage: str, total: int) -> None:
         """Start counting progress of ``stage`` towards ``total`` samples."""
         self._stage, self._done, self._total = stage, 0, int(total)
@@ -78,8 +83,7 @@ class SolverContext:
 
     def check_cancel(self) -> None:
         """Raise ``Cancelled`` when the caller's event is set."""
-        if self._cancel is not None and self._cancel.is_set():
-            raise Cancelled(f"solver cancelled during {self._stage or 'setup'}")
+        raise_if_cancelled(self._cancel, self.stage)
 
     def draw_noise(self, count: int) -> torch.Tensor:
         """Seeded standard normal noise (count, C, h, w) on the views' device and dtype."""

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from idpose_core.cancellation import checked_in_modules, raise_if_cancelled
 from idpose_core.predictor import NoisePredictor
 from idpose_core.solver.config import SolverConfig
 from idpose_core.solver.context import Progress, SolverContext
@@ -52,11 +53,12 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
     """Relative poses from view 0 (the anchor) to views 1..N-1 by inverting ``predictor``.
 
     ``images`` (N, 3, H, W) in [-1, 1] (or a sequence of (3, H, W)); ``progress(stage, done, total)``
-    is called as samples are evaluated; setting ``cancel`` stops before the next predictor call with
-    ``Cancelled``. ``known_polar`` (N-1,) are relative polar angles (radians) known from gravity, NaN
-    where unknown: those views search azimuth only (``config.known_polar`` says whether refinement may
-    move them). Bad input raises ``ValueError`` before the predictor is touched. Seeded by
-    ``config.seed``: repeated runs on the CPU are identical.
+    is called as samples are evaluated; setting ``cancel`` stops with ``Cancelled`` before the next
+    predictor call, or inside one at its next torch module (``checked_in_modules``). ``known_polar``
+    (N-1,) are relative polar angles (radians) known from gravity, NaN where unknown: those views search
+    azimuth only (``config.known_polar`` says whether refinement may move them). Bad input raises
+    ``ValueError`` before the predictor is touched. Seeded by ``config.seed``: repeated runs on the
+    CPU are identical.
     """
     config = config or SolverConfig()
     config.validate()
@@ -69,25 +71,28 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
                              f"{np.asarray(known_polar).tolist()}")
     seconds: dict[str, float] = {}
 
-    clock = time.perf_counter()
-    views = predictor.encode(images)
-    seconds["encode"] = time.perf_counter() - clock
-    if len(views) != len(images):
-        raise ValueError(f"predictor encoded {len(views)} views from {len(images)} images")
-    context = SolverContext(predictor, views, config, progress, cancel, known)
+    raise_if_cancelled(cancel, "setup")
+    context: SolverContext | None = None
+    with checked_in_modules(cancel, lambda: f"a model call ({context.stage if context else 'encoding'})"):
+        clock = time.perf_counter()
+        views = predictor.encode(images)
+        seconds["encode"] = time.perf_counter() - clock
+        if len(views) != len(images):
+            raise ValueError(f"predictor encoded {len(views)} views from {len(images)} images")
+        context = SolverContext(predictor, views, config, progress, cancel, known)
 
-    def timed(stage: str, work):
-        start = time.perf_counter()
-        out = work()
-        seconds[stage] = time.perf_counter() - start
-        return out
+        def timed(stage: str, work):
+            start = time.perf_counter()
+            out = work()
+            seconds[stage] = time.perf_counter() - start
+            return out
 
-    candidates = timed("exploration", lambda: explore(context, len(images)))
-    start = timed("selection", lambda: select(context, candidates))
-    poses = timed("refinement", lambda: refine(context, start, config.variant, config.refine_steps_per_view))
-    poses[:, 1] = wrap_azimuth(poses[:, 1])
-    scores, runner_poses, runner_scores, ambiguous = timed("scoring", lambda: score(context, poses, candidates))
-    runner_poses[:, 1] = wrap_azimuth(runner_poses[:, 1])
+        candidates = timed("exploration", lambda: explore(context, len(images)))
+        start = timed("selection", lambda: select(context, candidates))
+        poses = timed("refinement", lambda: refine(context, start, config.variant, config.refine_steps_per_view))
+        poses[:, 1] = wrap_azimuth(poses[:, 1])
+        scores, runner_poses, runner_scores, ambiguous = timed("scoring", lambda: score(context, poses, candidates))
+        runner_poses[:, 1] = wrap_azimuth(runner_poses[:, 1])
     return SolverResult(
         rel_poses=poses.double().numpy(),
         scores=scores.double().numpy(),

@@ -18,3 +18,10 @@ class ModelLoadError(ValueError):
         self.path = str(path)
         self.problem = problem
         super().__init__(f"{self.path}: {problem}. {DOWNLOAD_HINT}")
+
+
+def summary(error: BaseException, limit: int = 400) -> str:
+    """A library's error message on one line, shortened: enough to see which tensor or file is wrong."""
+    text = " ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
+    text = text.split(" You may consider adding `ignore_mismatched_sizes")[0]  # not an option for users here
+    return text if len(text) <= limit else text[: limit - 3] + "..."

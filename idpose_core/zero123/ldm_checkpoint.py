@@ -8,22 +8,20 @@ tower is renamed here (OpenAI -> transformers names). The architecture comes fro
 """
 from __future__ import annotations
 
-import pickle
 import re
-import zipfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import torch
 from diffusers import AutoencoderKL, DDIMScheduler, UNet2DConditionModel
 from diffusers.loaders.single_file_utils import convert_ldm_unet_checkpoint, convert_ldm_vae_checkpoint
-from safetensors.torch import load_file
 from transformers import CLIPVisionConfig, CLIPVisionModelWithProjection
 
 from idpose_core.zero123.config import Zero123Config
 from idpose_core.zero123.errors import ModelLoadError
 from idpose_core.zero123.ldm_architecture import CLIP_PREFIX, UNET_PREFIX, VAE_PREFIX, config_from_ldm_state
 from idpose_core.zero123.modules import Zero123Modules, require_fit
+from idpose_core.zero123.weight_files import read_weights
 
 PROJECTION_PREFIX = "cc_projection."
 
@@ -80,32 +78,14 @@ def load_ldm_checkpoint(path: str | Path, config: Zero123Config | None = None, u
 
 
 def read_state_dict(file: Path) -> dict[str, torch.Tensor]:
-    """The tensors of a ``.ckpt``/``.pt`` (``weights_only=True``, memory-mapped) or ``.safetensors`` file."""
+    """The tensors of a PyTorch checkpoint (zip memory-mapped, or legacy pickle) or a safetensors file."""
     if not file.is_file():
         raise ModelLoadError(file, "no such checkpoint file")
-    try:
-        if file.suffix == ".safetensors":
-            loaded = load_file(str(file))
-        else:
-            loaded = torch.load(file, map_location="cpu", weights_only=True, mmap=zipfile.is_zipfile(file))
-    except pickle.UnpicklingError as error:
-        raise ModelLoadError(
-            file,
-            "the checkpoint holds pickled Python objects besides tensors; unpickling them would execute "
-            f"code, which this project refuses (torch.load weights_only=True: {_refused_global(error)})",
-        ) from error
-    except (RuntimeError, OSError, EOFError, ValueError) as error:
-        raise ModelLoadError(file, f"not a readable checkpoint ({type(error).__name__}: {error})") from error
+    loaded = read_weights(file)
     state = loaded.get("state_dict", loaded) if isinstance(loaded, dict) else loaded
     if not isinstance(state, dict) or not all(isinstance(value, torch.Tensor) for value in state.values()):
         raise ModelLoadError(file, "the checkpoint is not a state_dict of tensors")
     return state
-
-
-def _refused_global(error: pickle.UnpicklingError) -> str:
-    """The Python object the weights-only unpickler refused, e.g. ``argparse.Namespace``."""
-    found = re.search(r"Unsupported global: GLOBAL ([\w.]+)", str(error))
-    return f"refused {found.group(1)}" if found else " ".join(str(error).split())[:200]
 
 
 def clip_visual_to_transformers(state: Mapping[str, torch.Tensor], prefix: str) -> dict[str, torch.Tensor]:

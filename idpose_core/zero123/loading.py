@@ -13,16 +13,18 @@ from typing import Any
 
 import torch
 from diffusers import AutoencoderKL, DDIMScheduler, UNet2DConditionModel
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 from transformers import CLIPVisionModelWithProjection
 
 from idpose_core.zero123.config import CLIP_MEAN, CLIP_STD, SCHEDULER
-from idpose_core.zero123.errors import ModelLoadError
+from idpose_core.zero123.errors import ModelLoadError, summary
 from idpose_core.zero123.modules import Zero123Modules, require_fit
+from idpose_core.zero123.weight_files import read_weights, weight_file_kind
 
 # Projection folder name -> name of its Linear inside the saved module (both conversions exist).
 PROJECTION_FOLDERS = {"cc_projection": "projection", "clip_camera_projection": "proj"}
 WEIGHT_FILES = ("diffusion_pytorch_model.safetensors", "diffusion_pytorch_model.bin")
+WEIGHT_SUFFIXES = (".safetensors", ".bin")  # checked before the libraries read a part
 
 
 def load_diffusers_folder(path: str | Path) -> Zero123Modules:
@@ -74,12 +76,18 @@ def save_diffusers_folder(modules: Zero123Modules, path: str | Path) -> None:
 
 
 def _load_part(root: Path, name: str, cls: Any) -> Any:
-    """``cls.from_pretrained`` on ``root/name``, refusing missing, unexpected or mis-shaped weights."""
+    """``cls.from_pretrained`` on ``root/name``, refusing damaged, missing, unexpected or mis-shaped weights."""
+    for file in sorted((root / name).glob("*")):
+        if file.suffix in WEIGHT_SUFFIXES and file.is_file():
+            try:
+                weight_file_kind(file)
+            except (ValueError, OSError) as error:
+                raise ModelLoadError(root, f"part '{name}': {file.name} is {error}") from error
     try:
         extra = {"low_cpu_mem_usage": False} if cls is not CLIPVisionModelWithProjection else {}
         model, info = cls.from_pretrained(root / name, local_files_only=True, output_loading_info=True, **extra)
-    except (OSError, ValueError, RuntimeError, KeyError) as error:
-        raise ModelLoadError(root, f"cannot load part '{name}': {_summary(error)}") from error
+    except Exception as error:  # noqa: BLE001 - whatever the library says, one error naming the part
+        raise ModelLoadError(root, f"cannot load part '{name}': {summary(error)}") from error
     for kind in ("missing_keys", "mismatched_keys", "unexpected_keys"):
         keys = sorted(map(str, info.get(kind) or ()))
         if keys:
@@ -99,27 +107,19 @@ def _load_projection(folder: Path, linear_name: str) -> torch.nn.Linear:
         linear.load_state_dict(state)
     except RuntimeError as error:
         raise ModelLoadError(folder.parent,
-                             f"part '{folder.name}' does not match its config: {_summary(error)}") from error
+                             f"part '{folder.name}' does not match its config: {summary(error)}") from error
     return linear
 
 
 def _read_weights(folder: Path, root: Path) -> dict[str, torch.Tensor]:
     """Safetensors first, else a pickle loaded with ``weights_only=True``."""
-    for file_name, read in zip(WEIGHT_FILES, (_safetensors, _weights_only_pickle)):
+    for file_name in WEIGHT_FILES:
         if (folder / file_name).is_file():
-            try:
-                return read(folder / file_name)
-            except Exception as error:  # noqa: BLE001 - any unreadable file becomes one clear error
-                raise ModelLoadError(root, f"cannot read {folder.name}/{file_name}: {_summary(error)}") from error
+            weights = read_weights(folder / file_name)
+            if not isinstance(weights, dict):
+                raise ModelLoadError(root, f"{folder.name}/{file_name} is not a state_dict of tensors")
+            return weights
     raise ModelLoadError(root, f"part '{folder.name}' has no weights ({' or '.join(WEIGHT_FILES)})")
-
-
-def _safetensors(file: Path) -> dict[str, torch.Tensor]:
-    return load_file(str(file))
-
-
-def _weights_only_pickle(file: Path) -> dict[str, torch.Tensor]:
-    return torch.load(file, map_location="cpu", weights_only=True)
 
 
 def _load_scheduler(folder: Path) -> DDIMScheduler:
@@ -175,15 +175,8 @@ def _read_json(file: Path, root: Path) -> dict[str, Any]:
     try:
         return json.loads(file.read_text())
     except (OSError, ValueError) as error:
-        raise ModelLoadError(root, f"cannot read {file.relative_to(root)}: {_summary(error)}") from error
+        raise ModelLoadError(root, f"cannot read {file.relative_to(root)}: {summary(error)}") from error
 
 
 def _write_json(file: Path, content: dict[str, Any]) -> None:
     file.write_text(json.dumps(content, indent=2) + "\n")
-
-
-def _summary(error: BaseException, limit: int = 400) -> str:
-    """The library's message on one line, shortened: enough to see which tensor or file is wrong."""
-    text = " ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
-    text = text.split(" You may consider adding `ignore_mismatched_sizes")[0]  # not an option for users here
-    return text if len(text) <= limit else text[: limit - 3] + "..."
