@@ -50,9 +50,21 @@ def roll_angle(up: np.ndarray) -> float:
 
 
 def rz(angle: float) -> np.ndarray:
-    """Rotation (3, 3) about the optical z axis by ``angle`` radians."""
+    """Rotation (3, 3) about the z axis (a camera's optical axis) by ``angle`` radians."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def ry(angle: float) -> np.ndarray:
+    """Rotation (3, 3) about the y axis by ``angle`` radians."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rx(angle: float) -> np.ndarray:
+    """Rotation (3, 3) about the x axis by ``angle`` radians."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
 def polar_angle(up: np.ndarray, ray: np.ndarray = (0.0, 0.0, 1.0)) -> float:

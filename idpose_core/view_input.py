@@ -43,11 +43,11 @@ class ViewInput:
             raise ViewInputError(f"{name}: expected an RGB uint8 array (H, W, 3), got "
                                  f"{getattr(rgb, 'dtype', type(rgb).__name__)} {getattr(rgb, 'shape', '')}")
         shape = rgb.shape[:2]
-        for name, kinds in (("alpha", (np.uint8,)), ("mask", (np.bool_, np.uint8)), ("depth", (np.float32,))):
-            value = getattr(self, name)
+        for field_name, kinds in (("alpha", (np.uint8,)), ("mask", (np.bool_, np.uint8)), ("depth", (np.float32,))):
+            value = getattr(self, field_name)
             if value is not None and (not isinstance(value, np.ndarray) or value.dtype.type not in kinds
                                       or value.shape != shape):
-                raise ViewInputError(f"{name}: {name} must be {'/'.join(k.__name__ for k in kinds)} {shape}, "
+                raise ViewInputError(f"{name}: {field_name} must be {'/'.join(k.__name__ for k in kinds)} {shape}, "
                                      f"got {getattr(value, 'dtype', type(value).__name__)} "
                                      f"{getattr(value, 'shape', '')}")
         if self.intrinsics is not None:

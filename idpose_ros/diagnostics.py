@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from idpose_core.pipeline import PipelineResult
+
 STATUS_NAME = "idpose_estimator: estimation"
 RUNNING_STATES = ("estimating", "cancelling")  # a run is still on the worker: no new one can start
 
@@ -28,6 +30,7 @@ class EstimatorStatus:
     last_run_seconds: float | None = None
     scores: tuple[float, ...] = field(default_factory=tuple)
     ambiguous: tuple[bool, ...] = field(default_factory=tuple)
+    inputs: dict[str, str] = field(default_factory=dict)  # what the last result read off its views (result_inputs)
 
 
 def level(status: EstimatorStatus) -> bytes:
@@ -60,9 +63,24 @@ def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> 
     for view, (score, ambiguous) in enumerate(zip(status.scores, status.ambiguous), start=1):
         values[f"view_{view}_score"] = f"{score:.6g}"
         values[f"view_{view}_ambiguous"] = str(bool(ambiguous)).lower()
+    values.update(status.inputs)
     entry = DiagnosticStatus(level=level(status), name=STATUS_NAME, message=summary(status),
                              hardware_id=hardware_id,
                              values=[KeyValue(key=k, value=v) for k, v in values.items()])
     array = DiagnosticArray(status=[entry])
     array.header.stamp = stamp
     return array
+
+
+def result_inputs(result: PipelineResult) -> dict[str, str]:
+    """Diagnostic values of what an estimate read off its views: where the anchor's polar angle and distance
+    came from, and per view k (0 = the anchor) the mask method (and why a more trusted one was not used),
+    the roll and polar angle from gravity."""
+    values = {"anchor_polar_deg": f"{result.anchor_polar_deg:.2f}", "anchor_polar_source": result.polar_source,
+              "object_distance": f"{result.object_distance:.4f}", "object_distance_source": result.distance_source}
+    for k, view in enumerate(result.views):
+        values[f"view_{k}_mask"] = view.mask_method + (f" ({view.mask_note})" if view.mask_note else "")
+        if view.roll_deg is not None:
+            values[f"view_{k}_roll_deg"] = f"{view.roll_deg:.2f}"
+            values[f"view_{k}_polar_deg"] = f"{view.polar_deg:.2f}"
+    return values

@@ -12,11 +12,12 @@ import signal
 import sys
 import threading
 import time
+from dataclasses import replace
 from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray
+from geometry_msgs.msg import PoseArray, PoseStamped, QuaternionStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
@@ -24,7 +25,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
-from sensor_msgs.msg import CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Imu, RegionOfInterest
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -33,12 +34,21 @@ from idpose_core.pipeline import PipelineResult, estimate_view_poses, views_mosa
 from idpose_core.predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_core.solver import Progress
-from idpose_ros.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array
+from idpose_ros.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array, result_inputs
 from idpose_ros.estimation_worker import EstimationWorker, Outcome
+from idpose_ros.input_sync import IMAGE_INPUTS, InputSync, stamp_ns
 from idpose_ros.model_holder import ModelHolder
-from idpose_ros.parameters import NodeSettings, current_values, declare_parameters, node_settings, pipeline_settings
+from idpose_ros.parameters import (
+    NodeSettings,
+    current_values,
+    declare_parameters,
+    node_settings,
+    optical_from_imu,
+    pipeline_settings,
+)
 from idpose_ros.raw_image import RawImage
 from idpose_ros.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
+from idpose_ros.view_inputs import with_inputs
 from msg_adapters import AdapterError, ImageTooLarge, array_to_image, camera_markers, poses_to_pose_array
 
 NODE_NAME = "idpose_estimator"
@@ -53,6 +63,8 @@ RESULT_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durabil
 # overwrote all but the last 10 and their clients never got an answer. Every service callback answers
 # at once, so a deep queue holds a burst of this many calls per service without delaying any of them.
 SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+# An IMU publishes hundreds of readings a second: a deep best-effort queue keeps them while a callback runs.
+IMU_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 class EstimatorNode(Node):
@@ -68,6 +80,9 @@ class EstimatorNode(Node):
             raise
         settings = node_settings(current_values(self))
         self._buffer = ViewBuffer(settings.max_views)
+        self._sync = InputSync(settings.gravity, optical_from_imu(settings), settings.imu_window,
+                               settings.input_tolerance)
+        self._roi: tuple[int, int, int, int] | None = None  # the latest region of interest, for views kept later
         self._worker = EstimationWorker(self.get_logger().info)
         self._model = ModelHolder(self._load_model, self._model_unavailable)
         self._status_lock = threading.Lock()
@@ -79,6 +94,7 @@ class EstimatorNode(Node):
         self._last_run_seconds: float | None = None
         self._scores: tuple[float, ...] = ()
         self._ambiguous: tuple[bool, ...] = ()
+        self._inputs: dict[str, str] = {}
         self.add_post_set_parameters_callback(self._on_parameters_set)
 
         images = MutuallyExclusiveCallbackGroup()  # one image at a time keeps capture order
@@ -86,6 +102,18 @@ class EstimatorNode(Node):
         self.create_subscription(Image, "image", self._on_image, qos_profile_sensor_data, callback_group=images)
         self.create_subscription(CompressedImage, "image/compressed", self._on_compressed, qos_profile_sensor_data,
                                  callback_group=images)
+        inputs = MutuallyExclusiveCallbackGroup()  # depth, masks, intrinsics, gravity, region of interest
+        for kind in IMAGE_INPUTS:
+            self.create_subscription(Image, kind, lambda msg, kind=kind: self._on_image_input(kind, msg),
+                                     qos_profile_sensor_data, callback_group=inputs)
+        self.create_subscription(CameraInfo, "camera_info", self._sync.add_camera_info, qos_profile_sensor_data,
+                                 callback_group=inputs)
+        if settings.gravity != "off":
+            self.create_subscription(Imu, "imu", self._on_imu, IMU_QOS, callback_group=inputs)
+            for kind, topic in ((QuaternionStamped, "camera_orientation"), (PoseStamped, "camera_pose")):
+                self.create_subscription(kind, topic, self._on_orientation, qos_profile_sensor_data,
+                                         callback_group=inputs)
+        self.create_subscription(RegionOfInterest, "roi", self._on_roi, 10, callback_group=inputs)
         for name, handler in (("capture", self._capture), ("estimate", self._estimate), ("cancel", self._cancel),
                               ("reset", self._reset)):
             self.create_service(Trigger, f"~/{name}", handler, qos_profile=SERVICE_QOS, callback_group=services)
@@ -145,14 +173,25 @@ class EstimatorNode(Node):
         self._kept(view, count, settings)
 
     def _prepare(self, image: RawImage) -> View:
-        """Decode ``image`` (its size checked first) and check it can be a view; ``ImageRefused`` says why not.
-
-        Whatever goes wrong, the node and the views it holds stay.
+        """Decode ``image`` (its size checked first) with the other inputs of its stamp and check it can be a view;
+        ``ImageRefused`` says why not. Whatever goes wrong, the node and the views it holds stay.
         """
         name = f"{image.source} on {image.topic}"
         try:
             pixels = image.decode(node_settings(current_values(self)).max_image_pixels)
-            precheck_view(pixels.rgb, pixels.alpha, name)
+            height, width = pixels.rgb.shape[:2]
+            matched = self._sync.match(stamp_ns(image.stamp), (width, height), self.get_clock().now().nanoseconds)
+            if matched.gravity_problem:
+                if self._sync.gravity == "required":
+                    raise ImageRefused(f"{name}: no gravity reading for it ({matched.gravity_problem}; gravity: "
+                                       "required)")
+                self.get_logger().warning(f"{name}: kept without gravity ({matched.gravity_problem})",
+                                          throttle_duration_sec=THROTTLE)
+            pixels = with_inputs(pixels, matched.depth, matched.mask, matched.camera_info, matched.gravity_up,
+                                 self._roi)
+            precheck_view(pixels, name)
+        except ImageRefused:
+            raise
         except ImageTooLarge as exc:
             raise ImageRefused(f"{name}: {exc} (max_image_pixels)") from exc
         except AdapterError as exc:
@@ -161,7 +200,40 @@ class EstimatorNode(Node):
             raise ImageRefused(str(exc)) from exc
         except Exception as exc:  # an adapter bug must not kill the node or the views it holds
             raise ImageRefused(f"{name}: it failed to decode: {type(exc).__name__}: {exc}") from exc
-        return View(pixels, frame_id=image.frame_id, stamp=image.stamp, source=image.source)
+        return View(pixels, frame_id=image.frame_id, stamp=image.stamp, source=image.source, pending=matched.pending)
+
+    # ----- other inputs ----------------------------------------------------------------------------------------
+    def _on_image_input(self, kind: str, msg: Image) -> None:
+        """A depth or mask image: kept for views to come, and given to kept views still waiting for it."""
+        self._sync.add_image(kind, msg, self.get_clock().now().nanoseconds)
+
+        def fill(view: View) -> View | None:
+            if not self._sync.fits(kind, msg, stamp_ns(view.stamp)):
+                return None
+            try:
+                return replace(view, input=with_inputs(view.input, **{kind: msg}), pending=view.pending - {kind})
+            except AdapterError as exc:
+                self.get_logger().warning(f"the {kind} image for a view taken at {stamp_ns(view.stamp) * 1e-9:.3f} s "
+                                          f"is not used: {exc}", throttle_duration_sec=THROTTLE)
+                return replace(view, pending=view.pending - {kind})
+
+        self._buffer.complete(kind, fill)
+
+    def _on_imu(self, msg: Imu) -> None:
+        try:
+            self._sync.add_imu(msg, self.get_clock().now().nanoseconds)
+        except AdapterError as exc:
+            self.get_logger().warning(f"dropped an imu message: {exc}", throttle_duration_sec=THROTTLE)
+
+    def _on_orientation(self, msg: QuaternionStamped | PoseStamped) -> None:
+        try:
+            self._sync.add_orientation(msg, self.get_clock().now().nanoseconds)
+        except AdapterError as exc:
+            self.get_logger().warning(f"dropped a camera orientation: {exc}", throttle_duration_sec=THROTTLE)
+
+    def _on_roi(self, msg: RegionOfInterest) -> None:
+        """Views kept from now on look for their object here (an empty region clears it)."""
+        self._roi = (msg.x_offset, msg.y_offset, msg.width, msg.height) if msg.width and msg.height else None
 
     def _kept(self, view: View, count: int, settings: NodeSettings) -> None:
         role = "anchor" if count == 1 else f"view {count}"
@@ -247,6 +319,10 @@ class EstimatorNode(Node):
         settings, pipeline = node_settings(values), pipeline_settings(values)
         named_frame = settings.anchor_frame or views[0].frame_id
         frame_id = named_frame or FALLBACK_FRAME
+        for index, view in enumerate(views):
+            if view.pending:
+                self.get_logger().warning(f"view {index + 1}: no {' or '.join(sorted(view.pending))} image matched "
+                                          "its stamp; it is estimated without")
 
         def job(progress: Progress, cancel: threading.Event) -> PipelineResult:
             predictor = self._model.get()  # waits for a start-up load still running
@@ -298,6 +374,7 @@ class EstimatorNode(Node):
             self._last_run_seconds = outcome.seconds
             self._scores = tuple(float(s) for s in solved.scores)
             self._ambiguous = tuple(bool(a) for a in solved.ambiguous)
+            self._inputs = result_inputs(result)
         self._finish(run_id, "idle")
         self.get_logger().info(f"published {len(result.poses)} poses in frame '{frame_id}' "
                                f"after {outcome.seconds:.1f} s ({int(sum(self._ambiguous))} ambiguous)")
@@ -330,7 +407,7 @@ class EstimatorNode(Node):
                 max_views=self._buffer.max_views, model=self._model.describe(), images_received=self._images_received,
                 stage=progress.stage if progress else "", progress_percent=progress.percent if progress else 0.0,
                 last_error=self._last_error, last_run_seconds=self._last_run_seconds,
-                scores=self._scores, ambiguous=self._ambiguous)
+                scores=self._scores, ambiguous=self._ambiguous, inputs=self._inputs)
 
     def _publish_diagnostics(self) -> None:
         hardware_id = f"{self.get_fully_qualified_name()} ({node_settings(current_values(self)).device})"

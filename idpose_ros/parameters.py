@@ -9,12 +9,16 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from idpose_core.gravity import rx, ry, rz
 from idpose_core.pipeline import PipelineSettings
 from idpose_core.solver import SolverConfig
+from idpose_core.transforms import quaternion_to_matrix
+from idpose_ros.input_sync import GRAVITY_MODES
 
 INT32_MAX = 2**31 - 1
 
@@ -65,6 +69,19 @@ class NodeSettings:
         "frame_id of the published poses; empty = the anchor image's header.frame_id"))
     diagnostics_period: float = field(default=1.0, metadata=_spec(
         "seconds between two /diagnostics messages", bounds=(0.05, 60.0), read_only=True))
+    gravity: str = field(default="auto", metadata=_spec(
+        "each view's roll and elevation from the imu or camera_orientation/camera_pose topics: off, auto (when "
+        "they publish), required (a view without a gravity reading within input_tolerance is refused)",
+        choices=GRAVITY_MODES, read_only=True))
+    imu_to_optical: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 1.0], metadata=_spec(
+        "rotation from the imu topic's frame to the camera's optical frame: a quaternion x y z w, or roll pitch "
+        "yaw in radians (a RealSense accel or imu topic: 0 0 0 1)", read_only=True))
+    imu_window: float = field(default=0.1, metadata=_spec(
+        "seconds of accelerometer readings before an image averaged into its gravity", bounds=(0.0, 5.0),
+        read_only=True))
+    input_tolerance: float = field(default=0.02, metadata=_spec(
+        "largest stamp difference (s) between an image and its depth, mask or gravity reading",
+        bounds=(0.0, 1.0), read_only=True))
 
 
 SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
@@ -93,7 +110,8 @@ SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
 def parameter_table() -> list[tuple[str, Any, dict[str, Any]]]:
     """(name, default, spec) of every parameter, node first, then solver."""
     solver_defaults = SolverConfig()
-    node = [(f.name, f.default, dict(f.metadata)) for f in dataclasses.fields(NodeSettings)]
+    node = [(f.name, f.default if f.default is not dataclasses.MISSING else f.default_factory(), dict(f.metadata))
+            for f in dataclasses.fields(NodeSettings)]
     solver = [(name, getattr(solver_defaults, name), spec) for name, spec in SOLVER_PARAMETERS.items()]
     return node + solver
 
@@ -120,6 +138,10 @@ def problem(values: dict[str, Any]) -> str | None:
     for name, _, spec in parameter_table():
         if spec["choices"] and values[name] not in spec["choices"]:
             return f"{name} must be one of {', '.join(spec['choices'])}, got {values[name]!r}"
+    if len(values["imu_to_optical"]) not in (3, 4) or (len(values["imu_to_optical"]) == 4 and not any(
+            values["imu_to_optical"])):
+        return (f"imu_to_optical must be a quaternion x y z w (not all zero) or roll pitch yaw, got "
+                f"{list(values['imu_to_optical'])}")
     if values["views_per_estimate"] > values["max_views"]:
         return (f"views_per_estimate ({values['views_per_estimate']}) cannot exceed max_views "
                 f"({values['max_views']})")
@@ -148,6 +170,15 @@ def pipeline_settings(values: dict[str, Any]) -> PipelineSettings:
 
 def node_settings(values: dict[str, Any]) -> NodeSettings:
     return NodeSettings(**{f.name: values[f.name] for f in dataclasses.fields(NodeSettings)})
+
+
+def optical_from_imu(settings: NodeSettings) -> np.ndarray:
+    """The ``imu_to_optical`` rotation (3, 3): from a quaternion x y z w or roll pitch yaw (rad, fixed axes)."""
+    values = np.asarray(settings.imu_to_optical, dtype=np.float64)
+    if len(values) == 4:
+        return quaternion_to_matrix(values)
+    roll, pitch, yaw = values
+    return rz(yaw) @ ry(pitch) @ rx(roll)
 
 
 def current_values(node: Node) -> dict[str, Any]:

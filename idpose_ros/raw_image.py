@@ -11,7 +11,7 @@ from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CompressedImage, Image
 
 from idpose_core.pipeline import ViewInput
-from msg_adapters import compressed_to_rgb, image_to_rgb
+from idpose_ros.view_inputs import decode_image
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,4 @@ class RawImage:
     def decode(self, max_pixels: int) -> ViewInput:
         """The pixels as the pipeline takes them; ``AdapterError`` (``ImageTooLarge`` above ``max_pixels``,
         checked before decoding) when they cannot be read."""
-        if isinstance(self.message, Image):
-            return ViewInput(*image_to_rgb(self.message, max_pixels))
-        return ViewInput(*compressed_to_rgb(self.message, max_pixels))
+        return ViewInput(*decode_image(self.message, max_pixels))

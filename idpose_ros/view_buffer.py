@@ -22,6 +22,7 @@ class View:
     frame_id: str
     stamp: Time
     source: str  # e.g. "Image rgb8" or "CompressedImage png", for log lines
+    pending: frozenset[str] = frozenset()  # inputs whose message had not arrived when the view was kept
 
 
 class CaptureRefused(Exception):
@@ -92,6 +93,17 @@ class ViewBuffer:
         for an image that cannot be one) and keep it; returns the view and the new number of views."""
         view = prepare(self._take_latest())
         return view, self._keep(view, now)
+
+    def complete(self, kind: str, fill: Callable[[View], View | None]) -> int:
+        """Give views still waiting for ``kind`` (depth, mask) what ``fill`` makes of them (None: not this one);
+        returns how many were filled."""
+        with self._lock:
+            filled = 0
+            for index, view in enumerate(self._views):
+                if kind in view.pending and (done := fill(view)) is not None:
+                    self._views[index] = done
+                    filled += 1
+            return filled
 
     def anchor(self) -> View | None:
         """The first kept view, None while the buffer is empty."""

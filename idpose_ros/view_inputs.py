@@ -1,8 +1,10 @@
 """A view's messages -> the pipeline's ``ViewInput``: image, depth, mask and intrinsics decoded by msg_adapters.
 
-The node and the bag evaluator both go through ``view_input``, so a view means the same to both.
+The node and the bag evaluator both go through these functions, so a view means the same to both.
 """
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
@@ -18,29 +20,41 @@ from msg_adapters import (
 )
 
 
-def decode_image(message: Image | CompressedImage) -> tuple[np.ndarray, np.ndarray | None]:
-    """(rgb (H, W, 3) uint8, alpha (H, W) uint8 | None) of an Image or CompressedImage."""
-    return (image_to_rgb if isinstance(message, Image) else compressed_to_rgb)(message)
+def decode_image(message: Image | CompressedImage, max_pixels: int | None = None
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
+    """(rgb (H, W, 3) uint8, alpha (H, W) uint8 | None) of an Image or CompressedImage; ``ImageTooLarge`` above
+    ``max_pixels`` (checked before decoding)."""
+    return (image_to_rgb if isinstance(message, Image) else compressed_to_rgb)(message, max_pixels)
 
 
-def view_input(image: Image | CompressedImage, depth: Image | None = None, mask: Image | None = None,
-               camera_info: CameraInfo | None = None, gravity_up: np.ndarray | None = None,
-               roi: tuple[int, int, int, int] | None = None) -> ViewInput:
-    """Decode one view; AdapterError names the message that does not decode or does not fit the image
-    (depth and mask must be aligned to it: the same width and height; so must the CameraInfo)."""
-    rgb, alpha = decode_image(image)
-    height, width = rgb.shape[:2]
+def with_inputs(view: ViewInput, depth: Image | None = None, mask: Image | None = None,
+                camera_info: CameraInfo | None = None, gravity_up: np.ndarray | None = None,
+                roi: tuple[int, int, int, int] | None = None) -> ViewInput:
+    """The view with these inputs decoded and added (None keeps what it has); AdapterError names the message
+    that does not decode or does not fit the image (depth and mask must be aligned to it: the same width and
+    height; so must the CameraInfo)."""
+    height, width = view.rgb.shape[:2]
     decoded = {"depth": image_to_depth(depth) if depth is not None else None,
                "mask": image_to_mask(mask) if mask is not None else None}
     for name, array in decoded.items():
         if array is not None and array.shape != (height, width):
             raise AdapterError(f"the {name} image is {array.shape[1]}x{array.shape[0]}, the colour image "
                                f"{width}x{height}: they must be aligned (e.g. aligned_depth_to_color)")
-    intrinsics = None
+    changes = {name: array for name, array in decoded.items() if array is not None}
     if camera_info is not None:
         if (camera_info.width, camera_info.height) not in ((width, height), (0, 0)):
             raise AdapterError(f"CameraInfo is for {camera_info.width}x{camera_info.height} images, the image is "
                                f"{width}x{height}")
-        intrinsics = camera_info_intrinsics(camera_info)
-    return ViewInput(rgb, alpha, decoded["mask"], decoded["depth"], intrinsics,
-                     None if gravity_up is None else np.asarray(gravity_up, dtype=np.float64), roi)
+        changes["intrinsics"] = camera_info_intrinsics(camera_info)
+    if gravity_up is not None:
+        changes["gravity_up"] = np.asarray(gravity_up, dtype=np.float64)
+    if roi is not None:
+        changes["roi"] = roi
+    return replace(view, **changes)
+
+
+def view_input(image: Image | CompressedImage, depth: Image | None = None, mask: Image | None = None,
+               camera_info: CameraInfo | None = None, gravity_up: np.ndarray | None = None,
+               roi: tuple[int, int, int, int] | None = None) -> ViewInput:
+    """Decode one view and its inputs (``with_inputs``)."""
+    return with_inputs(ViewInput(*decode_image(image)), depth, mask, camera_info, gravity_up, roi)

@@ -16,7 +16,8 @@ from idpose_core.solver import SolverConfig
 from idpose_ros.parameters import SOLVER_PARAMETERS, declare_parameters, node_settings, parameter_table, solver_config
 
 ROOT = Path(__file__).resolve().parents[1]
-READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "diagnostics_period"}
+READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "diagnostics_period", "gravity",
+             "imu_to_optical", "imu_window", "input_tolerance"}
 
 
 @pytest.fixture
