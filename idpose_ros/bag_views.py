@@ -13,15 +13,17 @@ from pathlib import Path
 import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from tqdm import tqdm
 
 from idpose_core.evaluation import match_stamps
 from idpose_core.transforms import TransformBuffer, TransformLookupError
 from idpose_ros.bag_io import BagError, open_bag, topic_connections
-from msg_adapters import AdapterError, compressed_to_rgb, image_to_rgb, pose_to_matrix
+from msg_adapters import AdapterError, camera_info_to_matrix, compressed_to_rgb, image_to_rgb, pose_to_matrix
 
 IMAGE_TYPES = {"sensor_msgs/msg/Image": Image, "sensor_msgs/msg/CompressedImage": CompressedImage}
+CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+TRANSPORTS = ("compressed", "compressedDepth", "theora", "zstd")  # image_transport's sub-topic suffixes
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
 
@@ -45,17 +47,40 @@ class BagViews:
     """Every image on the topic (``views``), the ground truth of the usable ones and why others are skipped.
 
     ``world_from_camera[view_id]`` (4, 4) is the camera's optical frame in the world frame;
-    ``skipped[view_id]`` says why a view has no usable ground truth or image.
+    ``skipped[view_id]`` says why a view has no usable ground truth or image; ``camera_matrix`` (3, 3) is K
+    of the first CameraInfo on ``camera_info_topic``, or None when the bag has no calibrated one there.
     """
 
     views: list[ViewInfo]
     world_from_camera: dict[int, np.ndarray]
     skipped: dict[int, str]
+    camera_info_topic: str = ""
+    camera_matrix: np.ndarray | None = None
 
     @property
     def pool(self) -> list[int]:
         """The usable view ids, in capture order."""
         return sorted(self.world_from_camera)
+
+
+def default_camera_info_topic(image_topic: str) -> str:
+    """The camera_info topic beside an image topic, as image_transport names it: /cam/image_raw[/compressed]
+    -> /cam/camera_info."""
+    base = image_topic.rstrip("/")
+    if base.rsplit("/", 1)[-1] in TRANSPORTS:
+        base = base.rsplit("/", 1)[0]
+    return f"{base.rsplit('/', 1)[0]}/camera_info"
+
+
+def _camera_matrix(reader, topic: str) -> np.ndarray | None:
+    """K of the first CameraInfo on ``topic``; None when the topic is absent or the camera uncalibrated."""
+    connections = [c for c in reader.connections if c.topic == topic and c.msgtype == CAMERA_INFO_TYPE]
+    for _, _, raw in (reader.messages(connections=connections) if connections else ()):
+        try:
+            return camera_info_to_matrix(deserialize_message(raw, CameraInfo))
+        except AdapterError:
+            return None
+    return None
 
 
 def decode_view(message: Image | CompressedImage) -> tuple[np.ndarray, np.ndarray | None]:
@@ -130,14 +155,17 @@ def _ground_truth_from_topic(reader, views: list[ViewInfo], topic: str, world_fr
 
 
 def read_bag_views(path: str | Path, image_topic: str, world_frame: str = "world", gt_topic: str | None = None,
-                   gt_tolerance: float = 0.01) -> BagViews:
+                   gt_tolerance: float = 0.01, camera_info_topic: str | None = None) -> BagViews:
     """The views of ``image_topic`` and their ground truth from /tf (default) or the PoseStamped ``gt_topic``.
 
     A view without ground truth (or whose image does not decode) is kept in ``skipped`` with the
-    reason. ``gt_tolerance`` (s) bounds the stamp difference when matching ``gt_topic`` poses.
+    reason. ``gt_tolerance`` (s) bounds the stamp difference when matching ``gt_topic`` poses. The
+    intrinsics come from ``camera_info_topic`` (default: the image topic's camera_info).
     """
     world_frame = world_frame.lstrip("/")
+    camera_info_topic = camera_info_topic or default_camera_info_topic(image_topic)
     with open_bag(path) as reader:
+        camera_matrix = _camera_matrix(reader, camera_info_topic)
         views, broken = _scan_images(reader, image_topic)
         if gt_topic is None:
             poses, skipped = _ground_truth_from_tf(reader, views, world_frame)
@@ -147,7 +175,8 @@ def read_bag_views(path: str | Path, image_topic: str, world_frame: str = "world
     for view_id, reason in broken.items():
         poses.pop(view_id, None)
         skipped[view_id] = reason
-    return BagViews(views=views, world_from_camera=poses, skipped=dict(sorted(skipped.items())))
+    return BagViews(views=views, world_from_camera=poses, skipped=dict(sorted(skipped.items())),
+                    camera_info_topic=camera_info_topic, camera_matrix=camera_matrix)
 
 
 def load_view_messages(path: str | Path, image_topic: str, view_ids: set[int]

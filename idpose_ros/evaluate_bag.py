@@ -7,6 +7,9 @@ views, the first view being the anchor, either in-process (``--mode offline``) o
 views to the estimator node over ROS (``--mode replay``). Writes report.json, report.md and
 cameras_<sample>.png into ``--out``.
 
+With ``--baselines colmap features`` the classical baselines (``idpose_core.baselines``) run on the same
+views of every estimate and get their own rows, with convergence counts and seconds per estimate.
+
 In Python, ``evaluate_bag(bag, estimator, ground_truth, protocol)`` returns a ``BagEvaluation`` and
 ``bag_report.write_report`` writes it: build the estimator once (``make_estimator``) for many bags.
 """
@@ -24,6 +27,8 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from idpose_core.baselines import BASELINES, run_baseline
+from idpose_core.baselines.scoring import score_baseline
 from idpose_core.cameras import c2w_to_spherical
 from idpose_core.evaluation import (
     PICK_SIZE,
@@ -39,7 +44,7 @@ from idpose_core.solver import Progress
 from idpose_core.zero123 import ModelLoadError
 from idpose_ros.bag_io import BagError
 from idpose_ros.bag_report import write_report
-from idpose_ros.bag_views import BagViews, load_view_messages, read_bag_views
+from idpose_ros.bag_views import BagViews, decode_view, load_view_messages, read_bag_views
 from idpose_ros.estimators import (
     NODE_BOUNDS,
     ImageMessage,
@@ -57,7 +62,8 @@ RANDOM_DRAWS = 200  # random-pose guesses per scored pair: the baseline row of t
 class GroundTruthOptions:
     """Where a bag's views and their true camera poses are: the image topic, and /tf from ``world_frame``
     (or the PoseStamped ``gt_topic`` matched within ``gt_tolerance`` s); the object's centre and the
-    world's up axis in the world frame."""
+    world's up axis in the world frame; the views' intrinsics for the baselines (``camera_info_topic``,
+    None: the image topic's camera_info)."""
 
     image_topic: str = "/camera/image_raw"
     world_frame: str = "world"
@@ -65,6 +71,7 @@ class GroundTruthOptions:
     gt_tolerance: float = 0.01
     object_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    camera_info_topic: str | None = None
 
     @property
     def description(self) -> str:
@@ -84,7 +91,8 @@ class EvaluationProtocol:
 @dataclass
 class BagEvaluation:
     """What ``evaluate_bag`` measured on one bag: per-pair records, per-estimate rows, per-sample cameras,
-    the random-pose baseline on the same pairs, and what produced them (``report.json`` holds it all)."""
+    the random-pose baseline and the classical ``baselines`` on the same pairs (their records and rows by
+    name), and what produced them (``report.json`` holds it all)."""
 
     bag: Path
     ground_truth: GroundTruthOptions
@@ -98,6 +106,9 @@ class BagEvaluation:
     estimates: list[dict[str, Any]] = field(default_factory=list)
     true_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> (k, 4, 4) OpenGL c2w
     predicted_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> largest n's
+    baselines: tuple[str, ...] = ()
+    baseline_records: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    baseline_estimates: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     seconds: float = 0.0
 
     @property
@@ -116,6 +127,9 @@ class BagEvaluation:
         self.estimates.append(outcome.row)
         self.true_cameras[task.sample] = task.true_c2w
         self.predicted_cameras[task.sample] = outcome.predicted_c2w
+        for name, (records, row) in outcome.baselines.items():
+            self.baseline_records.setdefault(name, []).extend(records)
+            self.baseline_estimates.setdefault(name, []).append(row)
 
 
 def usable_view_counts(requested: Sequence[int], pool_size: int) -> list[int]:
@@ -138,7 +152,8 @@ def anchor_geometry(true_c2w: np.ndarray) -> tuple[float, float]:
 class EstimateTask:
     """One estimate of the protocol: the first ``n`` views of pick ``sample`` (``pick``: view ids, anchor first),
     with the true cameras of the whole pick (``true_c2w`` (k, 4, 4), OpenGL, object frame); ``index`` is its
-    place in the run, which with ``seed`` seeds its random baseline."""
+    place in the run, which with ``seed`` seeds its random baseline; ``camera_matrix`` (3, 3) the views'
+    intrinsics for the classical baselines (None: unknown)."""
 
     sample: int
     index: int
@@ -146,17 +161,20 @@ class EstimateTask:
     n: int
     true_c2w: np.ndarray
     seed: int
+    camera_matrix: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class EstimateOutcome:
-    """What one estimate adds to the evaluation: pair records, random-baseline records, the estimate's row
-    and the predicted cameras (n, 4, 4), the anchor's true one first."""
+    """What one estimate adds to the evaluation: pair records, random-baseline records, the estimate's row,
+    the predicted cameras (n, 4, 4), the anchor's true one first, and per classical baseline its (pair
+    records, row) on the same views."""
 
     records: list[dict[str, Any]]
     random_records: list[dict[str, Any]]
     row: dict[str, Any]
     predicted_c2w: np.ndarray
+    baselines: dict[str, tuple[list[dict[str, Any]], dict[str, Any]]] = field(default_factory=dict)
 
 
 def plan_tasks(views: BagViews, ground_truth: GroundTruthOptions, protocol: EvaluationProtocol
@@ -168,14 +186,15 @@ def plan_tasks(views: BagViews, ground_truth: GroundTruthOptions, protocol: Eval
     for sample, pick in enumerate(picks):
         true_c2w = object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), ground_truth.object_center,
                                     ground_truth.up)
-        tasks += [EstimateTask(sample, len(tasks) + k, tuple(pick), n, true_c2w, protocol.seed)
+        tasks += [EstimateTask(sample, len(tasks) + k, tuple(pick), n, true_c2w, protocol.seed, views.camera_matrix)
                   for k, n in enumerate(counts)]
     return tasks
 
 
 def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, messages: Sequence[ImageMessage],
-                 progress: Progress | None = None) -> EstimateOutcome:
-    """Estimate the task's views (``messages``: its first n images, anchor first) and score them."""
+                 progress: Progress | None = None, baselines: Sequence[str] = ()) -> EstimateOutcome:
+    """Estimate the task's views (``messages``: its first n images, anchor first) and score them; then the
+    same for each named classical baseline (``idpose_core.baselines.BASELINES``)."""
     true_c2w = task.true_c2w[:task.n]
     anchor_polar_deg, distance = anchor_geometry(true_c2w)
     estimate = estimator(messages, anchor_polar_deg, distance, progress)
@@ -187,7 +206,25 @@ def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, messages: Sequ
     row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "seconds": estimate.seconds,
            "anchor_polar_deg": anchor_polar_deg, "object_distance": distance}
     predicted = np.concatenate([true_c2w[:1], predicted_c2w(true_c2w[0], [r["pred_rel_sph"] for r in records])])
-    return EstimateOutcome(records, random_baseline(true_c2w, (task.seed, task.index, task.n)), row, predicted)
+    return EstimateOutcome(records, random_baseline(true_c2w, (task.seed, task.index, task.n)), row, predicted,
+                           {name: classical_baseline(name, task, messages) for name in baselines})
+
+
+def classical_baseline(name: str, task: EstimateTask, messages: Sequence[ImageMessage]
+                       ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """(pair records, row) of the baseline ``name`` on the task's views; a view it cannot place gets a random
+    guess seeded by the task (``score_baseline``)."""
+    true_c2w = task.true_c2w[:task.n]
+    anchor_polar_deg, distance = anchor_geometry(true_c2w)
+    estimate = run_baseline(name, [decode_view(message) for message in messages], task.camera_matrix, distance)
+    rng = np.random.default_rng([task.seed, task.index, task.n, 1 + list(BASELINES).index(name)])
+    records = [{"sample": task.sample, "n": task.n, "anchor_view": task.pick[0], "view": target, **record,
+                "seconds": estimate.seconds}
+               for target, record in zip(task.pick[1:task.n], score_baseline(
+                   estimate, true_c2w, math.radians(anchor_polar_deg), distance, rng))]
+    row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "status": estimate.status,
+           "registered": [int(v) for v, ok in zip(task.pick, estimate.registered) if ok], "seconds": estimate.seconds}
+    return records, row
 
 
 def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str, Any]]:
@@ -201,7 +238,7 @@ def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str,
 def read_views(bag: Path, ground_truth: GroundTruthOptions) -> BagViews:
     """The bag's views with their ground truth; BagError for an unreadable bag or a missing topic."""
     gt = ground_truth
-    return read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance)
+    return read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance, gt.camera_info_topic)
 
 
 def require_usable(views: BagViews, image_topic: str) -> None:
@@ -214,12 +251,17 @@ def require_usable(views: BagViews, image_topic: str) -> None:
 
 def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTruthOptions = GroundTruthOptions(),
                  protocol: EvaluationProtocol = EvaluationProtocol(), views: BagViews | None = None,
-                 show_progress: bool = True) -> BagEvaluation:
-    """Estimate the first n views of each seeded pick of the bag's posed views and score every pair.
+                 show_progress: bool = True, baselines: Sequence[str] = ()) -> BagEvaluation:
+    """Estimate the first n views of each seeded pick of the bag's posed views and score every pair; the
+    named classical ``baselines`` run on the same views of every estimate.
 
     ``views`` are ``read_views(bag, ground_truth)`` when already read. Raises ``BagError`` for an
-    unreadable bag, a missing topic or fewer than 2 usable views, and whatever the estimator raises.
+    unreadable bag, a missing topic or fewer than 2 usable views, ValueError for an unknown baseline,
+    and whatever the estimator raises.
     """
+    unknown = [name for name in baselines if name not in BASELINES]
+    if unknown:
+        raise ValueError(f"unknown baseline {unknown[0]!r}: choose from {', '.join(BASELINES)}")
     started = time.perf_counter()
     gt = ground_truth
     views = views or read_views(bag, gt)
@@ -228,7 +270,7 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
     run = BagEvaluation(bag=Path(bag), ground_truth=gt, protocol=protocol,
                         estimator={**estimator.description, "node_parameters": estimator.values}, views=views,
                         picks=list({task.sample: list(task.pick) for task in tasks}.values()),
-                        view_counts=sorted({task.n for task in tasks}))
+                        view_counts=sorted({task.n for task in tasks}), baselines=tuple(baselines))
     messages = load_view_messages(bag, gt.image_topic, {v for task in tasks for v in task.pick})
     with tqdm(total=len(tasks), desc="estimating", unit="set", file=sys.stderr, disable=not show_progress) as bar:
         for task in tasks:
@@ -240,7 +282,8 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
                     bar.set_postfix_str(text)
 
             bar.set_postfix_str(label)
-            run.add(task, run_estimate(estimator, task, [messages[v] for v in task.pick[:task.n]], progress))
+            run.add(task, run_estimate(estimator, task, [messages[v] for v in task.pick[:task.n]], progress,
+                                       baselines))
             bar.update()
     run.seconds = time.perf_counter() - started
     return run
@@ -259,12 +302,15 @@ def add_ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
                        help="object centre in the world frame (default origin)")
     group.add_argument("--up", type=float, nargs=3, default=(0.0, 0.0, 1.0), metavar=("X", "Y", "Z"),
                        help="world up axis (default +z)")
+    group.add_argument("--camera-info-topic", default=None,
+                       help="sensor_msgs/CameraInfo of the views, for --baselines (default: the image topic's "
+                            "camera_info; without one, a 60 deg field of view)")
 
 
 def ground_truth_options(args: argparse.Namespace) -> GroundTruthOptions:
     """The options ``add_ground_truth_arguments`` parsed."""
     return GroundTruthOptions(args.image_topic, args.world_frame, args.gt_topic, args.gt_tolerance,
-                              tuple(args.object_center), tuple(args.up))
+                              tuple(args.object_center), tuple(args.up), args.camera_info_topic)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -274,6 +320,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--samples", type=int, default=5, help="random picks of 8 views (default 5)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the picks")
     parser.add_argument("--n", type=int, nargs="+", default=list(VIEW_COUNTS), help="view counts (default 2 4 6 8)")
+    parser.add_argument("--baselines", nargs="+", choices=tuple(BASELINES), default=[], metavar="NAME",
+                        help=f"classical baselines on the same views: {', '.join(BASELINES)}")
     add_ground_truth_arguments(parser)
     add_estimator_arguments(parser)
     args = parser.parse_args(argv)
@@ -309,7 +357,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"evaluate_bag: {len(views.pool)} usable views: evaluating sets of {', '.join(map(str, counts))} "
                   "views only", file=sys.stderr)
         estimator = make_estimator(options)
-        evaluation = evaluate_bag(args.bag, estimator, ground_truth, protocol, views)
+        evaluation = evaluate_bag(args.bag, estimator, ground_truth, protocol, views, baselines=args.baselines)
     except (BagError, ModelLoadError, ReplayError, ValueError) as err:
         print(f"evaluate_bag: error: {err}", file=sys.stderr)
         return 2

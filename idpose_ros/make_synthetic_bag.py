@@ -22,7 +22,14 @@ from tqdm import tqdm
 
 from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
 from idpose_core.synthetic.robot_views import LINK_FROM_OPTICAL, pinhole_intrinsics, robot_chain
-from idpose_core.synthetic.scenes import FOV_DEG, SceneRenderer, demo_objects, random_camera_spheres, unseen_objects
+from idpose_core.synthetic.scenes import (
+    FOV_DEG,
+    SceneRenderer,
+    demo_objects,
+    random_camera_spheres,
+    textured_objects,
+    unseen_objects,
+)
 from idpose_core.transforms import split_transform
 from idpose_ros.bag_io import TYPESTORE, BagError, BagWriter
 from msg_adapters import array_to_image, matrix_to_pose
@@ -32,7 +39,7 @@ IMAGE_TOPIC, INFO_TOPIC, POSE_TOPIC = "/camera/image_raw", "/camera/camera_info"
 START_NS = 100 * 1_000_000_000  # first view at t = 100 s
 PERIOD_NS = 1_000_000_000  # one view per second
 STOP_NS = 100_000_000  # the robot holds still 0.1 s either side of a view
-OBJECT_SETS = {"demo": demo_objects, "unseen": unseen_objects}
+OBJECT_SETS = {"demo": demo_objects, "unseen": unseen_objects, "textured": textured_objects}
 
 
 def ros_time(stamp: int) -> Time:
