@@ -1,0 +1,133 @@
+#!/usr/bin/env python3
+"""ID-Pose beside the classical baselines (COLMAP, SIFT + essential matrix) and random poses, on the same views.
+
+Two sets: the six shipped demo bags (``data/demo_bags/<object>``) and fresh bags of the textured objects
+(``make_synthetic_bag --objects textured``, 12 views, camera seed ``--seed``, ``--size`` px: detailed textures
+and enough pixels for SIFT). ``evaluate_bag`` runs offline on each with ``--baselines colmap features`` (the
+embedded demo model, ``--preset``, n = 2 and 4, ``--samples`` picks); the pairs and estimates of each set are
+pooled per method and view count: RotAcc@15/30, mean rotation error, the convergence counts "A + B of C" and
+seconds per estimate, and RotAcc@15 by the true angle between anchor and target. Prints the tables and writes
+bench/results/baselines.json.
+
+    python bench/baselines.py [--samples 2] [--preset fast] [--size 512]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script from a checkout
+
+import numpy as np  # noqa: E402 (after the path setup)
+import torch  # noqa: E402
+
+from idpose_core.baselines import BASELINES, TITLES  # noqa: E402
+from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
+from idpose_core.metrics import aggregate  # noqa: E402
+from idpose_core.synthetic.scenes import textured_objects  # noqa: E402
+from idpose_ros.bag_report import RANDOM_METHOD, write_report  # noqa: E402
+from idpose_ros.estimators import EstimatorOptions, make_estimator  # noqa: E402
+from idpose_ros.evaluate_bag import BagEvaluation, EvaluationProtocol, evaluate_bag  # noqa: E402
+from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
+
+OUT = ROOT / "bench" / "results" / "baselines.json"
+ID_POSE = "ID-Pose (demo model)"
+ANGLE_BINS = ((0.0, 30.0), (30.0, 60.0), (60.0, 180.0))  # true anchor-target angle, degrees
+
+
+def separation_deg(evaluation: BagEvaluation, record: dict) -> float:
+    """Angle (degrees) between the anchor's and the target's directions from the object centre."""
+    centre = np.asarray(evaluation.ground_truth.object_center)
+    a, b = (evaluation.views.world_from_camera[v][:3, 3] - centre for v in (record["anchor_view"], record["view"]))
+    return math.degrees(math.acos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0)))
+
+
+def pooled(evaluations: list[BagEvaluation]) -> dict:
+    """Per method: aggregates of all pairs, estimate summaries, and RotAcc@15 per angle bin."""
+    methods = {ID_POSE: ([(e, r) for e in evaluations for r in e.records], [row for e in evaluations
+                                                                             for row in e.estimates])}
+    for name in BASELINES:
+        methods[TITLES[name]] = ([(e, r) for e in evaluations for r in e.baseline_records[name]],
+                                 [row for e in evaluations for row in e.baseline_estimates[name]])
+    result = {}
+    for method, (pairs, rows) in methods.items():
+        angles = np.array([separation_deg(e, r) for e, r in pairs])
+        errors = np.array([r["rot_err_deg"] for _, r in pairs])
+        by_angle = {}
+        for low, high in ANGLE_BINS:
+            inside = (angles >= low) & (angles < high)
+            accuracy = float(np.mean(errors[inside] < 15)) if inside.any() else None
+            by_angle[f"{low:g}-{high:g}"] = {"pairs": int(np.sum(inside)), "rot_acc_15": accuracy}
+        result[method] = {"aggregates": aggregate([r for _, r in pairs]), "estimates": estimate_summary(rows),
+                          "rot_acc_15_by_angle": by_angle}
+    result[RANDOM_METHOD] = {"aggregates": aggregate([r for e in evaluations for r in e.random_records])}
+    return result
+
+
+def print_set(name: str, methods: dict) -> None:
+    print(f"\n{name}\n\n| method | views | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | converged (A + B of C) "
+          "| s / estimate |\n|---|---|---|---|---|---|---|")
+    for method, row in methods.items():
+        for group, summary in row["aggregates"].items():
+            estimates = row.get("estimates", {}).get(group)
+            counts = (f"{estimates['converged']} + {estimates['fewer']} of {estimates['estimates']}"
+                      if estimates and "converged" in estimates else "—")
+            seconds = f"{estimates['mean_seconds']:.2f}" if estimates else "—"
+            print(f"| {method} | {group} | {100 * summary['rot_acc_15']:.1f} | {100 * summary['rot_acc_30']:.1f} | "
+                  f"{summary['mean_rot_err_deg']:.1f} | {counts} | {seconds} |")
+    print("\n| method | " + " | ".join(f"RotAcc@15°, {low:g}-{high:g}° apart (pairs)" for low, high in ANGLE_BINS)
+          + " |\n|---|---|---|---|")
+    for method, row in methods.items():
+        if "rot_acc_15_by_angle" in row:
+            cells = [f"{100 * b['rot_acc_15']:.1f} ({b['pairs']})" if b["rot_acc_15"] is not None
+                     else f"— ({b['pairs']})" for b in row["rot_acc_15_by_angle"].values()]
+            print(f"| {method} | " + " | ".join(cells) + " |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--samples", type=int, default=2, help="evaluate_bag picks per bag (n = 2 and 4 each)")
+    parser.add_argument("--preset", choices=("default", "fast"), default="fast")
+    parser.add_argument("--seed", type=int, default=101, help="camera seed of the fresh textured bags")
+    parser.add_argument("--size", type=int, default=512, help="image size of the fresh textured bags (px)")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    started = time.monotonic()
+    estimator = make_estimator(EstimatorOptions(preset=args.preset))
+    protocol = EvaluationProtocol(args.samples, 0, (2, 4))
+    sets = {}
+    with tempfile.TemporaryDirectory(prefix="idpose_baselines_") as folder:
+        work = Path(folder)
+        bags = {"demo bags": sorted((ROOT / "data" / "demo_bags").iterdir()), "textured objects": []}
+        for spec in textured_objects():
+            bag = work / spec.name
+            if make_synthetic_bag([str(bag), "--objects", "textured", "--object", spec.name, "--views", "12",
+                                   "--seed", str(args.seed), "--size", str(args.size)]):
+                raise RuntimeError(f"make_synthetic_bag failed for {spec.name}")
+            bags["textured objects"].append(bag)
+        for name, paths in bags.items():
+            evaluations = []
+            for bag in paths:
+                evaluations.append(evaluate_bag(bag, estimator, protocol=protocol, show_progress=False,
+                                                baselines=tuple(BASELINES)))
+                write_report(work / f"report_{bag.name}", evaluations[-1])
+                print(f"{name}: {bag.name} done ({(time.monotonic() - started) / 60:.1f} min)", flush=True)
+            sets[name] = {"bags": [bag.name for bag in paths], "methods": pooled(evaluations)}
+    estimator.close()
+    for name, result in sets.items():
+        print_set(name, result["methods"])
+    args.out.write_text(json.dumps({"arguments": {k: str(v) for k, v in vars(args).items()},
+                                    "minutes": (time.monotonic() - started) / 60, "sets": sets}, indent=2) + "\n")
+    print(f"\nwrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
