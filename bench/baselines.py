@@ -7,9 +7,10 @@ and enough pixels for SIFT). ``evaluate_bag`` runs offline on each with ``--base
 embedded demo model, ``--preset``, n = 2 and 4, ``--samples`` picks); the pairs and estimates of each set are
 pooled per method and view count: RotAcc@15/30, mean rotation error, the convergence counts "A + B of C" and
 seconds per estimate, and RotAcc@15 by the true angle between anchor and target. Prints the tables and writes
-bench/results/baselines.json.
+bench/results/baselines.json. ``--jobs`` bags are evaluated at once, each in its own process with its own model
+and ``--threads`` torch threads.
 
-    python bench/baselines.py [--samples 2] [--preset fast] [--size 512]
+    python bench/baselines.py [--samples 2] [--preset fast] [--size 512] [--jobs 2 --threads 1]
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ import math
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,13 +34,29 @@ from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.synthetic.scenes import textured_objects  # noqa: E402
 from idpose_ros.bag_report import RANDOM_METHOD, write_report  # noqa: E402
-from idpose_ros.estimators import EstimatorOptions, make_estimator  # noqa: E402
+from idpose_ros.estimators import EstimatorOptions, ViewSetEstimator, make_estimator  # noqa: E402
 from idpose_ros.evaluate_bag import BagEvaluation, EvaluationProtocol, evaluate_bag  # noqa: E402
 from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
 
 OUT = ROOT / "bench" / "results" / "baselines.json"
 ID_POSE = "ID-Pose (demo model)"
 ANGLE_BINS = ((0.0, 30.0), (30.0, 60.0), (60.0, 180.0))  # true anchor-target angle, degrees
+_WORKER: dict[str, ViewSetEstimator] = {}  # the model of this worker process
+
+
+def start_worker(preset: str, threads: int) -> None:
+    """Load the embedded demo model once per worker process."""
+    torch.set_num_threads(threads)
+    _WORKER["estimator"] = make_estimator(EstimatorOptions(preset=preset))
+
+
+def evaluate(bag: Path, samples: int, report: Path) -> BagEvaluation:
+    """ID-Pose and every baseline on the bag's n = 2 and 4 estimates; writes its report."""
+    evaluation = evaluate_bag(bag, _WORKER["estimator"], protocol=EvaluationProtocol(samples, 0, (2, 4)),
+                              show_progress=False, baselines=tuple(BASELINES))
+    write_report(report, evaluation)
+    print(f"{bag.name} done", flush=True)
+    return evaluation
 
 
 def separation_deg(evaluation: BagEvaluation, record: dict) -> float:
@@ -96,13 +114,11 @@ def main() -> None:
     parser.add_argument("--preset", choices=("default", "fast"), default="fast")
     parser.add_argument("--seed", type=int, default=101, help="camera seed of the fresh textured bags")
     parser.add_argument("--size", type=int, default=512, help="image size of the fresh textured bags (px)")
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--jobs", type=int, default=2, help="bags evaluated at once")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads per job")
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)
     started = time.monotonic()
-    estimator = make_estimator(EstimatorOptions(preset=args.preset))
-    protocol = EvaluationProtocol(args.samples, 0, (2, 4))
     sets = {}
     with tempfile.TemporaryDirectory(prefix="idpose_baselines_") as folder:
         work = Path(folder)
@@ -113,15 +129,12 @@ def main() -> None:
                                    "--seed", str(args.seed), "--size", str(args.size)]):
                 raise RuntimeError(f"make_synthetic_bag failed for {spec.name}")
             bags["textured objects"].append(bag)
-        for name, paths in bags.items():
-            evaluations = []
-            for bag in paths:
-                evaluations.append(evaluate_bag(bag, estimator, protocol=protocol, show_progress=False,
-                                                baselines=tuple(BASELINES)))
-                write_report(work / f"report_{bag.name}", evaluations[-1])
-                print(f"{name}: {bag.name} done ({(time.monotonic() - started) / 60:.1f} min)", flush=True)
-            sets[name] = {"bags": [bag.name for bag in paths], "methods": pooled(evaluations)}
-    estimator.close()
+        with ProcessPoolExecutor(args.jobs, initializer=start_worker, initargs=(args.preset, args.threads)) as pool:
+            runs = {name: [pool.submit(evaluate, bag, args.samples, work / f"report_{bag.name}") for bag in paths]
+                    for name, paths in bags.items()}
+            for name, paths in bags.items():
+                evaluations = [run.result() for run in runs[name]]
+                sets[name] = {"bags": [bag.name for bag in paths], "methods": pooled(evaluations)}
     for name, result in sets.items():
         print_set(name, result["methods"])
     args.out.write_text(json.dumps({"arguments": {k: str(v) for k, v in vars(args).items()},

@@ -80,36 +80,44 @@ def _registered_poses(reconstructions: dict[int, pycolmap.Reconstruction], count
     return cam_from_world, np.isin(np.arange(count), list(best))
 
 
+def _map_with_fewer_views(database: Path, image_dir: Path, names: list[str], seed: int
+                          ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Incremental mapping on every view, then on fewer until every view it is given registers:
+    (world-to-camera (n, 4, 4), registered (n,)), or None when not even the anchor and one view do."""
+    matches = _verified_matches(database, len(names))
+    views = list(range(len(names)))
+    while len(views) >= 2:
+        found = _registered_poses(pycolmap.incremental_mapping(
+            database, image_dir, image_dir.parent / f"sparse_{len(views)}",
+            _pipeline_options([names[v] for v in views], seed)), len(names))
+        kept = [] if found is None else [v for v in views if found[1][v]]
+        if len(kept) == len(views):
+            return found
+        views = kept if len(kept) >= 2 else [v for v in views if v != min(views[1:], key=lambda v: matches[v])]
+    return None
+
+
 def estimate_colmap(images: Sequence[np.ndarray], camera_matrix: np.ndarray, object_distance: float, seed: int = 0
                     ) -> BaselineEstimate:
     """COLMAP on the views (RGB uint8, anchor first); poses scaled by the anchor's ``object_distance``."""
-    start, count = time.perf_counter(), len(images)
+    start = time.perf_counter()
     fx, fy, cx, cy = camera_matrix[0, 0], camera_matrix[1, 1], camera_matrix[0, 2], camera_matrix[1, 2]
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model, reader.camera_params = "PINHOLE", f"{fx},{fy},{cx},{cy}"
     extraction, matching = pycolmap.FeatureExtractionOptions(), pycolmap.FeatureMatchingOptions()
     extraction.num_threads = matching.num_threads = 1
     with tempfile.TemporaryDirectory(prefix="idpose_colmap_") as folder, quiet_colmap():
-        work, names = Path(folder), [_image_name(index) for index in range(count)]
-        (work / "images").mkdir()
+        image_dir, names = Path(folder) / "images", [_image_name(index) for index in range(len(images))]
+        image_dir.mkdir()
         for name, image in zip(names, images):
-            cv2.imwrite(str(work / "images" / name), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-        database = work / "database.db"
+            cv2.imwrite(str(image_dir / name), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+        database = Path(folder) / "database.db"
         pycolmap.set_random_seed(seed)
-        pycolmap.extract_features(database, work / "images", names, camera_mode=pycolmap.CameraMode.SINGLE,
+        pycolmap.extract_features(database, image_dir, names, camera_mode=pycolmap.CameraMode.SINGLE,
                                   reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
         pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
-        matches = _verified_matches(database, count)
-        views = list(range(count))
-        while len(views) >= 2:
-            found = _registered_poses(pycolmap.incremental_mapping(
-                database, work / "images", work / f"sparse_{len(views)}",
-                _pipeline_options([names[v] for v in views], seed)), count)
-            kept = [] if found is None else [v for v in views if found[1][v]]
-            if found is not None and len(kept) == len(views):
-                scaled = scale_to_object_distance(in_anchor_frame(found[0]), found[1], object_distance)
-                if scaled is None:
-                    break
-                return BaselineEstimate(scaled, found[1], status_of(found[1]), time.perf_counter() - start)
-            views = kept if len(kept) >= 2 else [v for v in views if v != min(views[1:], key=lambda v: matches[v])]
-    return BaselineEstimate.failure(count, time.perf_counter() - start)
+        found = _map_with_fewer_views(database, image_dir, names, seed)
+    scaled = None if found is None else scale_to_object_distance(in_anchor_frame(found[0]), found[1], object_distance)
+    if scaled is None:
+        return BaselineEstimate.failure(len(images), time.perf_counter() - start)
+    return BaselineEstimate(scaled, found[1], status_of(found[1]), time.perf_counter() - start)
