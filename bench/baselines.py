@@ -4,13 +4,14 @@
 Two sets: the six shipped demo bags (``data/demo_bags/<object>``) and fresh bags of the textured objects
 (``make_synthetic_bag --objects textured``, 12 views, camera seed ``--seed``, ``--size`` px: detailed textures
 and enough pixels for SIFT). ``evaluate_bag`` runs offline on each with ``--baselines colmap features`` (the
-embedded demo model, ``--preset``, n = 2 and 4, ``--samples`` picks); the pairs and estimates of each set are
-pooled per method and view count: RotAcc@15/30, mean rotation error, the convergence counts "A + B of C" and
-seconds per estimate, and RotAcc@15 by the true angle between anchor and target. Prints the tables and writes
-bench/results/baselines.json. ``--jobs`` bags are evaluated at once, each in its own process with its own model
-and ``--threads`` torch threads.
+embedded demo model, ``--preset``, n = 2 and 4, ``--samples`` picks) and writes its report into
+``--work-dir/<bag>/``; a bag whose report is there already is not evaluated again, so an interrupted run
+resumes. The pairs and estimates of each set are pooled from the reports per method and view count:
+RotAcc@15/30, mean rotation error, the convergence counts "A + B of C", seconds per estimate, and RotAcc@15
+by the true angle between anchor and target. Prints the tables and writes bench/results/baselines.json.
+``--jobs`` bags are evaluated at once, each in its own process with its own model and ``--threads`` threads.
 
-    python bench/baselines.py [--samples 2] [--preset fast] [--size 512] [--jobs 2 --threads 1]
+    python bench/baselines.py [--samples 1] [--preset fast] [--size 512] [--jobs 2 --threads 1]
 """
 from __future__ import annotations
 
@@ -18,7 +19,6 @@ import argparse
 import json
 import math
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -35,7 +35,7 @@ from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.synthetic.scenes import textured_objects  # noqa: E402
 from idpose_ros.bag_report import RANDOM_METHOD, write_report  # noqa: E402
 from idpose_ros.estimators import EstimatorOptions, ViewSetEstimator, make_estimator  # noqa: E402
-from idpose_ros.evaluate_bag import BagEvaluation, EvaluationProtocol, evaluate_bag  # noqa: E402
+from idpose_ros.evaluate_bag import EvaluationProtocol, evaluate_bag  # noqa: E402
 from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
 
 OUT = ROOT / "bench" / "results" / "baselines.json"
@@ -50,47 +50,53 @@ def start_worker(preset: str, threads: int) -> None:
     _WORKER["estimator"] = make_estimator(EstimatorOptions(preset=preset))
 
 
-def evaluate(bag: Path, samples: int, report: Path) -> BagEvaluation:
-    """ID-Pose and every baseline on the bag's n = 2 and 4 estimates; writes its report."""
+def evaluate(bag: Path, samples: int, report: Path) -> Path:
+    """ID-Pose and every baseline on the bag's n = 2 and 4 estimates, written to ``report``."""
     evaluation = evaluate_bag(bag, _WORKER["estimator"], protocol=EvaluationProtocol(samples, 0, (2, 4)),
                               show_progress=False, baselines=tuple(BASELINES))
     write_report(report, evaluation)
     print(f"{bag.name} done", flush=True)
-    return evaluation
+    return report / "report.json"
 
 
-def separation_deg(evaluation: BagEvaluation, record: dict) -> float:
+def separation_deg(pair: dict, anchor_polar_deg: float) -> float:
     """Angle (degrees) between the anchor's and the target's directions from the object centre."""
-    centre = np.asarray(evaluation.ground_truth.object_center)
-    a, b = (evaluation.views.world_from_camera[v][:3, 3] - centre for v in (record["anchor_view"], record["view"]))
-    return math.degrees(math.acos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0)))
+    d_polar, d_azimuth, _ = pair["true_rel_sph"]
+    polar = math.radians(anchor_polar_deg)
+    cosine = math.cos(polar) * math.cos(polar + d_polar) + math.sin(polar) * math.sin(polar + d_polar) * math.cos(
+        d_azimuth)
+    return math.degrees(math.acos(min(max(cosine, -1.0), 1.0)))
 
 
-def pooled(evaluations: list[BagEvaluation]) -> dict:
-    """Per method: aggregates of all pairs, estimate summaries, and RotAcc@15 per angle bin."""
-    methods = {ID_POSE: ([(e, r) for e in evaluations for r in e.records], [row for e in evaluations
-                                                                             for row in e.estimates])}
+def pooled(reports: list[dict]) -> dict:
+    """Per method: aggregates of all pairs, estimate summaries and RotAcc@15 per angle bin; random poses."""
+    methods = {ID_POSE: ([(r, p) for r in reports for p in r["pairs"]], [e for r in reports for e in r["estimates"]])}
     for name in BASELINES:
-        methods[TITLES[name]] = ([(e, r) for e in evaluations for r in e.baseline_records[name]],
-                                 [row for e in evaluations for row in e.baseline_estimates[name]])
+        methods[TITLES[name]] = ([(r, p) for r in reports for p in r["baselines"][name]["pairs"]],
+                                 [e for r in reports for e in r["baselines"][name]["estimates"]])
     result = {}
     for method, (pairs, rows) in methods.items():
-        angles = np.array([separation_deg(e, r) for e, r in pairs])
-        errors = np.array([r["rot_err_deg"] for _, r in pairs])
+        polar = {(r["bag"], e["sample"], e["n"]): e["anchor_polar_deg"] for r in reports for e in r["estimates"]}
+        angles = np.array([separation_deg(p, polar[(r["bag"], p["sample"], p["n"])]) for r, p in pairs])
+        errors = np.array([p["rot_err_deg"] for _, p in pairs])
         by_angle = {}
         for low, high in ANGLE_BINS:
             inside = (angles >= low) & (angles < high)
             accuracy = float(np.mean(errors[inside] < 15)) if inside.any() else None
             by_angle[f"{low:g}-{high:g}"] = {"pairs": int(np.sum(inside)), "rot_acc_15": accuracy}
-        result[method] = {"aggregates": aggregate([r for _, r in pairs]), "estimates": estimate_summary(rows),
+        result[method] = {"aggregates": aggregate([p for _, p in pairs]), "estimates": estimate_summary(rows),
                           "rot_acc_15_by_angle": by_angle}
-    result[RANDOM_METHOD] = {"aggregates": aggregate([r for e in evaluations for r in e.random_records])}
+    random = [r["random_baseline"]["aggregates"] for r in reports]
+    result[RANDOM_METHOD] = {"aggregates": {group: {
+        "pairs": sum(a[group]["pairs"] for a in random),
+        **{key: sum(a[group][key] * a[group]["pairs"] for a in random) / sum(a[group]["pairs"] for a in random)
+           for key in ("rot_acc_15", "rot_acc_30", "mean_rot_err_deg")}} for group in random[0]}}
     return result
 
 
 def print_set(name: str, methods: dict) -> None:
-    print(f"\n{name}\n\n| method | views | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | converged (A + B of C) "
-          "| s / estimate |\n|---|---|---|---|---|---|---|")
+    print(f"\n{name}\n\n| method | views | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | pairs "
+          "| converged (A + B of C) | s / estimate |\n|---|---|---|---|---|---|---|---|")
     for method, row in methods.items():
         for group, summary in row["aggregates"].items():
             estimates = row.get("estimates", {}).get(group)
@@ -98,7 +104,7 @@ def print_set(name: str, methods: dict) -> None:
                       if estimates and "converged" in estimates else "—")
             seconds = f"{estimates['mean_seconds']:.2f}" if estimates else "—"
             print(f"| {method} | {group} | {100 * summary['rot_acc_15']:.1f} | {100 * summary['rot_acc_30']:.1f} | "
-                  f"{summary['mean_rot_err_deg']:.1f} | {counts} | {seconds} |")
+                  f"{summary['mean_rot_err_deg']:.1f} | {summary['pairs']} | {counts} | {seconds} |")
     print("\n| method | " + " | ".join(f"RotAcc@15°, {low:g}-{high:g}° apart (pairs)" for low, high in ANGLE_BINS)
           + " |\n|---|---|---|---|")
     for method, row in methods.items():
@@ -110,31 +116,34 @@ def print_set(name: str, methods: dict) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--samples", type=int, default=2, help="evaluate_bag picks per bag (n = 2 and 4 each)")
+    parser.add_argument("--samples", type=int, default=1, help="evaluate_bag picks per bag (n = 2 and 4 each)")
     parser.add_argument("--preset", choices=("default", "fast"), default="fast")
     parser.add_argument("--seed", type=int, default=101, help="camera seed of the fresh textured bags")
     parser.add_argument("--size", type=int, default=512, help="image size of the fresh textured bags (px)")
     parser.add_argument("--jobs", type=int, default=2, help="bags evaluated at once")
     parser.add_argument("--threads", type=int, default=1, help="torch threads per job")
+    parser.add_argument("--work-dir", type=Path, default=Path.home() / ".cache" / "idpose_bench_baselines",
+                        help="textured bags and every bag's report (kept: a rerun resumes)")
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
     started = time.monotonic()
-    sets = {}
-    with tempfile.TemporaryDirectory(prefix="idpose_baselines_") as folder:
-        work = Path(folder)
-        bags = {"demo bags": sorted((ROOT / "data" / "demo_bags").iterdir()), "textured objects": []}
-        for spec in textured_objects():
-            bag = work / spec.name
-            if make_synthetic_bag([str(bag), "--objects", "textured", "--object", spec.name, "--views", "12",
-                                   "--seed", str(args.seed), "--size", str(args.size)]):
-                raise RuntimeError(f"make_synthetic_bag failed for {spec.name}")
-            bags["textured objects"].append(bag)
-        with ProcessPoolExecutor(args.jobs, initializer=start_worker, initargs=(args.preset, args.threads)) as pool:
-            runs = {name: [pool.submit(evaluate, bag, args.samples, work / f"report_{bag.name}") for bag in paths]
-                    for name, paths in bags.items()}
-            for name, paths in bags.items():
-                evaluations = [run.result() for run in runs[name]]
-                sets[name] = {"bags": [bag.name for bag in paths], "methods": pooled(evaluations)}
+    bags = {"demo bags": sorted((ROOT / "data" / "demo_bags").iterdir()), "textured objects": []}
+    for spec in textured_objects():
+        bag = args.work_dir / "bags" / spec.name
+        if not bag.exists() and make_synthetic_bag([str(bag), "--objects", "textured", "--object", spec.name,
+                                                    "--views", "12", "--seed", str(args.seed), "--size",
+                                                    str(args.size)]):
+            raise RuntimeError(f"make_synthetic_bag failed for {spec.name}")
+        bags["textured objects"].append(bag)
+    reports = {name: [args.work_dir / "reports" / bag.name for bag in paths] for name, paths in bags.items()}
+    todo = [(bag, report) for name in bags for bag, report in zip(bags[name], reports[name])
+            if not (report / "report.json").is_file()]
+    with ProcessPoolExecutor(args.jobs, initializer=start_worker, initargs=(args.preset, args.threads)) as pool:
+        for done in [pool.submit(evaluate, bag, args.samples, report) for bag, report in todo]:
+            done.result()
+    sets = {name: {"bags": [bag.name for bag in bags[name]],
+                   "methods": pooled([json.loads((report / "report.json").read_text()) for report in reports[name]])}
+            for name in bags}
     for name, result in sets.items():
         print_set(name, result["methods"])
     args.out.write_text(json.dumps({"arguments": {k: str(v) for k, v in vars(args).items()},
