@@ -8,8 +8,11 @@ embedded demo model, ``--preset``, n = 2 and 4, ``--samples`` picks) and writes 
 ``--work-dir/<bag>/``; a bag whose report is there already is not evaluated again, so an interrupted run
 resumes. The pairs and estimates of each set are pooled from the reports per method and view count:
 RotAcc@15/30, mean rotation error, the convergence counts "A + B of C", seconds per estimate, and RotAcc@15
-by the true angle between anchor and target. Prints the tables and writes bench/results/baselines.json.
-``--jobs`` bags are evaluated at once, each in its own process with its own model and ``--threads`` threads.
+by the true angle between anchor and target. The baselines cost seconds, ID-Pose minutes, so the baselines
+alone also run on ``--baseline-samples`` picks per bag (the same tasks ``evaluate_bag`` plans, through its
+``classical_baseline``), for convergence counts and accuracy by angle on more pairs. Prints the tables and
+writes bench/results/baselines.json. ``--jobs`` bags are evaluated at once, each in its own process with its
+own model and ``--threads`` threads.
 
     python bench/baselines.py [--samples 1] [--preset fast] [--size 512] [--jobs 2 --threads 1]
 """
@@ -34,8 +37,16 @@ from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.synthetic.scenes import textured_objects  # noqa: E402
 from idpose_ros.bag_report import RANDOM_METHOD, write_report  # noqa: E402
+from idpose_ros.bag_views import load_view_messages  # noqa: E402
 from idpose_ros.estimators import EstimatorOptions, ViewSetEstimator, make_estimator  # noqa: E402
-from idpose_ros.evaluate_bag import EvaluationProtocol, evaluate_bag  # noqa: E402
+from idpose_ros.evaluate_bag import (  # noqa: E402
+    EvaluationProtocol,
+    GroundTruthOptions,
+    classical_baseline,
+    evaluate_bag,
+    plan_tasks,
+    read_views,
+)
 from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
 
 OUT = ROOT / "bench" / "results" / "baselines.json"
@@ -68,9 +79,27 @@ def separation_deg(pair: dict, anchor_polar_deg: float) -> float:
     return math.degrees(math.acos(min(max(cosine, -1.0), 1.0)))
 
 
+def baselines_only(bag: Path, samples: int) -> dict:
+    """A report-like dict of the baselines alone on ``samples`` picks of the bag (n = 2 and 4)."""
+    ground_truth = GroundTruthOptions()
+    views = read_views(bag, ground_truth)
+    tasks = plan_tasks(views, ground_truth, EvaluationProtocol(samples, 0, (2, 4)))
+    messages = load_view_messages(bag, ground_truth.image_topic, {v for task in tasks for v in task.pick})
+    report: dict = {"bag": str(bag), "estimates": [], "baselines": {}}
+    for name in BASELINES:
+        outcomes = [classical_baseline(name, task, [messages[v] for v in task.pick[:task.n]]) for task in tasks]
+        report["baselines"][name] = {"pairs": [p for records, _ in outcomes for p in records],
+                                     "estimates": [row for _, row in outcomes]}
+    for task in tasks:  # the anchor's polar angle, for the angle between views
+        report["estimates"].append({"sample": task.sample, "n": task.n, "anchor_polar_deg": float(np.degrees(
+            np.arccos(np.clip(task.true_c2w[0, 2, 3] / np.linalg.norm(task.true_c2w[0, :3, 3]), -1.0, 1.0))))})
+    return report
+
+
 def pooled(reports: list[dict]) -> dict:
     """Per method: aggregates of all pairs, estimate summaries and RotAcc@15 per angle bin; random poses."""
-    methods = {ID_POSE: ([(r, p) for r in reports for p in r["pairs"]], [e for r in reports for e in r["estimates"]])}
+    methods = {ID_POSE: ([(r, p) for r in reports for p in r["pairs"]], [e for r in reports for e in r["estimates"]])
+               } if "pairs" in reports[0] else {}
     for name in BASELINES:
         methods[TITLES[name]] = ([(r, p) for r in reports for p in r["baselines"][name]["pairs"]],
                                  [e for r in reports for e in r["baselines"][name]["estimates"]])
@@ -86,6 +115,8 @@ def pooled(reports: list[dict]) -> dict:
             by_angle[f"{low:g}-{high:g}"] = {"pairs": int(np.sum(inside)), "rot_acc_15": accuracy}
         result[method] = {"aggregates": aggregate([p for _, p in pairs]), "estimates": estimate_summary(rows),
                           "rot_acc_15_by_angle": by_angle}
+    if "random_baseline" not in reports[0]:
+        return result
     random = [r["random_baseline"]["aggregates"] for r in reports]
     result[RANDOM_METHOD] = {"aggregates": {group: {
         "pairs": sum(a[group]["pairs"] for a in random),
@@ -120,6 +151,7 @@ def main() -> None:
     parser.add_argument("--preset", choices=("default", "fast"), default="fast")
     parser.add_argument("--seed", type=int, default=101, help="camera seed of the fresh textured bags")
     parser.add_argument("--size", type=int, default=512, help="image size of the fresh textured bags (px)")
+    parser.add_argument("--baseline-samples", type=int, default=10, help="picks per bag for the baselines alone")
     parser.add_argument("--jobs", type=int, default=2, help="bags evaluated at once")
     parser.add_argument("--threads", type=int, default=1, help="torch threads per job")
     parser.add_argument("--work-dir", type=Path, default=Path.home() / ".cache" / "idpose_bench_baselines",
@@ -144,8 +176,11 @@ def main() -> None:
     sets = {name: {"bags": [bag.name for bag in bags[name]],
                    "methods": pooled([json.loads((report / "report.json").read_text()) for report in reports[name]])}
             for name in bags}
+    for name, paths in bags.items():
+        sets[name]["baselines_only"] = pooled([baselines_only(bag, args.baseline_samples) for bag in paths])
     for name, result in sets.items():
         print_set(name, result["methods"])
+        print_set(f"{name}, the baselines alone on {args.baseline_samples} picks per bag", result["baselines_only"])
     args.out.write_text(json.dumps({"arguments": {k: str(v) for k, v in vars(args).items()},
                                     "minutes": (time.monotonic() - started) / 60, "sets": sets}, indent=2) + "\n")
     print(f"\nwrote {args.out}")

@@ -19,6 +19,7 @@ import argparse
 import math
 import sys
 import time
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -213,11 +214,13 @@ def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, messages: Sequ
 def classical_baseline(name: str, task: EstimateTask, messages: Sequence[ImageMessage]
                        ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """(pair records, row) of the baseline ``name`` on the task's views; a view it cannot place gets a random
-    guess seeded by the task (``score_baseline``)."""
+    guess (``score_baseline``) seeded by the task and the anchor image, so that bags of different objects seen
+    from the same cameras draw different guesses."""
     true_c2w = task.true_c2w[:task.n]
     anchor_polar_deg, distance = anchor_geometry(true_c2w)
     estimate = run_baseline(name, [decode_view(message) for message in messages], task.camera_matrix, distance)
-    rng = np.random.default_rng([task.seed, task.index, task.n, 1 + list(BASELINES).index(name)])
+    rng = np.random.default_rng([task.seed, task.index, task.n, 1 + list(BASELINES).index(name),
+                                 zlib.crc32(bytes(messages[0].data))])
     records = [{"sample": task.sample, "n": task.n, "anchor_view": task.pick[0], "view": target, **record,
                 "seconds": estimate.seconds}
                for target, record in zip(task.pick[1:task.n], score_baseline(
