@@ -98,6 +98,13 @@ def apply_relative(anchor_sph: np.ndarray, rel_sph: np.ndarray, radius_scale: fl
     return absolute
 
 
+def pinhole_camera_matrix(width: int, height: int, fov_deg: float) -> np.ndarray:
+    """Camera matrix K (3, 3) of a ``width`` x ``height`` image with a horizontal field of view of ``fov_deg``,
+    square pixels and the principal point at the image centre."""
+    focal = 0.5 * width / np.tan(np.radians(fov_deg) / 2.0)
+    return np.array([[focal, 0.0, 0.5 * width], [0.0, focal, 0.5 * height], [0.0, 0.0, 1.0]])
+
+
 def anchor_frame_poses(
     rel_sph: np.ndarray, anchor_polar: float, object_distance: float, radius_scale: float = ZERO123_RADIUS
 ) -> np.ndarray:

@@ -57,11 +57,17 @@ def random_pose_errors(anchor_c2w: np.ndarray, target_c2w: np.ndarray, draws: in
     ``anchor_c2w``, ``target_c2w`` (P, 4, 4) true OpenGL camera-to-world matrices; scored by ``pair_errors``.
     """
     anchor_c2w = np.asarray(anchor_c2w, dtype=np.float64)[:, None]
-    anchor_sph = c2w_to_spherical(anchor_c2w)
-    shape = (len(anchor_c2w), draws)
+    guess = random_relative_poses(c2w_to_spherical(anchor_c2w), (len(anchor_c2w), draws), rng)
+    return pair_errors(guess, anchor_c2w, np.asarray(target_c2w, dtype=np.float64)[:, None])
+
+
+def random_relative_poses(anchor_sph: np.ndarray, shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
+    """Relative poses ``shape + (3,)`` from anchors ``anchor_sph`` (broadcast to ``shape + (3,)``) to cameras drawn
+    uniformly on the sphere at the anchor's distance (so the relative radius is 0 in any unit)."""
+    anchor_sph = np.broadcast_to(np.asarray(anchor_sph, dtype=np.float64), shape + (3,))
     guess = np.stack([np.arccos(rng.uniform(-1.0, 1.0, shape)), rng.uniform(0.0, 2 * np.pi, shape),
-                      np.broadcast_to(anchor_sph[..., 2], shape)], axis=-1)
-    return pair_errors(relative(anchor_sph, guess), anchor_c2w, np.asarray(target_c2w, dtype=np.float64)[:, None])
+                      anchor_sph[..., 2]], axis=-1)
+    return relative(anchor_sph, guess)
 
 
 def _summary(rot_err: np.ndarray, pos_err: np.ndarray) -> dict[str, float | int]:

@@ -13,6 +13,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interactive backend)
 import numpy as np  # noqa: E402
 
+from idpose_core.baselines import DEFAULT_FOV_DEG, TITLES  # noqa: E402
+from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_ros.bag_views import ExtraTopics  # noqa: E402
 
@@ -59,6 +61,26 @@ def summary_table(rows: dict[str, tuple[dict[str, float | int], dict[str, float 
                      f"{model['mean_rot_err_deg']:.1f} | {100 * baseline['rot_acc_15']:.1f} | "
                      f"{100 * baseline['rot_acc_30']:.1f} |")
     return "\n".join(lines)
+
+
+def convergence_table(methods: dict[str, dict[str, dict[str, float | int]]]) -> str:
+    """Rows: each method (name -> ``estimate_summary``) with each view count, then all estimates: the paper's
+    convergence counts "A + B of C" where the method has them, and the mean seconds per estimate."""
+    rows = ["| method | views | converged: all + fewer of estimates | s / estimate |", "|---|---|---|---|"]
+    for method, summaries in methods.items():
+        for group, summary in summaries.items():
+            counts = (f"{summary['converged']} + {summary['fewer']} of {summary['estimates']}" if "converged" in summary
+                      else f"— ({summary['estimates']} estimates)")
+            rows.append(f"| {method} | {group} | {counts} | {summary['mean_seconds']:.2f} |")
+    return "\n".join(rows)
+
+
+def intrinsics_note(evaluation: BagEvaluation) -> str:
+    """Where the baselines' intrinsics came from."""
+    topic = evaluation.ground_truth.inputs.camera_info_topic
+    if not any("camera_info" in sources.messages for sources in evaluation.views.extras.values()):
+        return f"no CameraInfo on {topic}: a {DEFAULT_FOV_DEG:g}° horizontal field of view"
+    return f"the CameraInfo on {topic} nearest in time to each anchor view"
 
 
 def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, float | int], dict[str, float | int]]:
@@ -124,7 +146,14 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
     estimator = run.estimator
     values, preset, mode, model = (estimator[key] for key in ("node_parameters", "solver_preset", "mode", "model"))
     method = f"ID-Pose ({values['variant']})"
-    table = markdown_table({method: aggregates, RANDOM_METHOD: random_aggregates})
+    baselines = {name: {"title": TITLES[name], "pairs": run.baseline_records[name],
+                        "estimates": run.baseline_estimates[name],
+                        "aggregates": aggregate(run.baseline_records[name]),
+                        "convergence": estimate_summary(run.baseline_estimates[name])} for name in run.baselines}
+    table = markdown_table({method: aggregates, **{b["title"]: b["aggregates"] for b in baselines.values()},
+                            RANDOM_METHOD: random_aggregates})
+    convergence = convergence_table({method: estimate_summary(run.estimates),
+                                     **{b["title"]: b["convergence"] for b in baselines.values()}})
     views_by_id = {view.view_id: view for view in views.views}
     report = {
         "bag": str(run.bag), "image_topic": gt.image_topic, "ground_truth": gt.description,
@@ -140,6 +169,7 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         "picks": run.picks, "estimates": run.estimates, "pairs": run.records, "aggregates": aggregates,
         "random_baseline": {"guesses_per_pair": len(run.random_records) // max(len(run.records), 1),
                             "aggregates": random_aggregates},
+        **({"baselines": baselines, "intrinsics": intrinsics_note(run)} if baselines else {}),
         "seconds": run.seconds,
     }
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -158,6 +188,11 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance. "
         f"{RANDOM_METHOD}: each pair's target camera guessed uniformly on the sphere at the anchor's distance, "
         f"{report['random_baseline']['guesses_per_pair']} guesses per pair (its pairs column counts guesses).\n"
+        + (f"\n## Baselines: convergence and time\n\n{convergence}\n\n"
+           "Converged: every view placed (all), or only some (fewer: COLMAP converged only when retried with "
+           "fewer views; the feature baseline placed only some pairs); a view a baseline could not place is "
+           "scored as one uniform random guess. "
+           f"Intrinsics: {report['intrinsics']}.\n" if baselines else "")
         + (f"\n## Skipped views\n\n{skipped}" if skipped else ""))
     for sample, pick in enumerate(run.picks):
         predicted = run.predicted_cameras[sample]

@@ -22,14 +22,10 @@ from idpose_core.gravity import GravityUnavailable, resting_acceleration, up_fro
 from idpose_core.transforms import TransformBuffer, TransformLookupError, quaternion_to_matrix
 from idpose_ros.bag_io import BagError, open_bag, topic_connections
 from idpose_ros.view_inputs import decode_image
-from msg_adapters import (
-    AdapterError,
-    imu_acceleration,
-    orientation_rotation,
-    pose_to_matrix,
-)
+from msg_adapters import AdapterError, imu_acceleration, orientation_rotation, pose_to_matrix
 
 IMAGE_TYPES = {"sensor_msgs/msg/Image": Image, "sensor_msgs/msg/CompressedImage": CompressedImage}
+TRANSPORTS = ("compressed", "compressedDepth", "theora", "zstd")  # image_transport's sub-topic suffixes
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
 EXTRA_TYPES = {"depth": {"sensor_msgs/msg/Image": Image}, "mask": {"sensor_msgs/msg/Image": Image},
@@ -54,7 +50,8 @@ class ViewInfo:
 
 @dataclass(frozen=True)
 class ExtraTopics:
-    """A view's inputs besides its image, each matched to the image by stamp within ``tolerance`` s.
+    """A view's inputs besides its image, each matched to the image by stamp within ``tolerance`` s (the
+    CameraInfo nearest in time, when the bag has the topic at all).
 
     ``gravity_topic`` carries sensor_msgs/Imu (its acceleration averaged over the ``imu_window`` s
     before the image, turned into the optical frame by ``imu_to_optical`` (x, y, z, w) or else by the
@@ -105,6 +102,15 @@ class BagViews:
     def pool(self) -> list[int]:
         """The usable view ids, in capture order."""
         return sorted(self.world_from_camera)
+
+
+def default_camera_info_topic(image_topic: str) -> str:
+    """The camera_info topic beside an image topic, as image_transport names it: /cam/image_raw[/compressed]
+    -> /cam/camera_info."""
+    base = image_topic.rstrip("/")
+    if base.rsplit("/", 1)[-1] in TRANSPORTS:
+        base = base.rsplit("/", 1)[0]
+    return f"{base.rsplit('/', 1)[0]}/camera_info"
 
 
 def _scan_images(reader, image_topic: str) -> tuple[list[ViewInfo], dict[int, str]]:
@@ -223,8 +229,11 @@ def _sources(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: Transfo
     matched: dict[int, dict[str, int]] = {view.view_id: {} for view in views}
     missing: dict[int, str] = {}
     for kind, topic in extras.topics.items():
+        if kind == "camera_info" and topic not in reader.topics:
+            continue  # intrinsics are optional: without them depth is not used and baselines assume a field of view
         stamps = [stamp for stamp, _ in _read(reader, topic, EXTRA_TYPES[kind])]
-        for view, index in zip(views, match_stamps([view.stamp for view in views], stamps, tolerance)):
+        limit = np.iinfo(np.int64).max if kind == "camera_info" else tolerance  # intrinsics rarely change
+        for view, index in zip(views, match_stamps([view.stamp for view in views], stamps, limit)):
             if index < 0:
                 missing.setdefault(view.view_id, f"no {kind}: nothing on {topic} within {extras.tolerance:g} s of "
                                                  f"the image stamp {view.stamp * 1e-9:.3f} s")
@@ -281,10 +290,10 @@ def load_view_messages(path: str | Path, image_topic: str, view_ids: set[int], b
                        extras: ExtraTopics = ExtraTopics()) -> dict[int, ViewMessages]:
     """The chosen views' messages, read again from the bag (their other inputs as ``bag.extras`` matched them)."""
     messages: dict[int, ViewMessages] = {}
-    wanted: dict[str, dict[int, list[int]]] = {kind: {} for kind in extras.topics}  # kind -> message -> views
-    for kind in wanted:
-        for view_id in view_ids:
-            wanted[kind].setdefault(bag.extras[view_id].messages[kind], []).append(view_id)
+    wanted: dict[str, dict[int, list[int]]] = {}  # kind -> message index on its topic -> views
+    for view_id in view_ids if bag else ():
+        for kind, index in bag.extras[view_id].messages.items():
+            wanted.setdefault(kind, {}).setdefault(index, []).append(view_id)
     with open_bag(path) as reader:
         connections = topic_connections(reader, image_topic, tuple(IMAGE_TYPES))
         for view_id, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
@@ -293,6 +302,8 @@ def load_view_messages(path: str | Path, image_topic: str, view_ids: set[int], b
                 messages[view_id] = ViewMessages(deserialize_message(raw, IMAGE_TYPES[connection.msgtype]),
                                                  gravity_up=gravity)
         for kind, topic in extras.topics.items():
+            if kind not in wanted:
+                continue
             types = EXTRA_TYPES[kind]
             for index, (connection, _, raw) in enumerate(
                     reader.messages(connections=topic_connections(reader, topic, tuple(types)))):

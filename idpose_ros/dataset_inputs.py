@@ -78,7 +78,7 @@ class BagInput:
 
     def messages(self, view_ids: set[int]) -> dict[int, ViewMessages]:
         return load_view_messages(self.path, self.ground_truth.image_topic, view_ids, self.views,
-                                  self.ground_truth.extras)
+                                  self.ground_truth.inputs)
 
     def summary(self) -> dict[str, Any]:
         return {"views": len(self.views.views), "usable": len(self.views.pool), "skipped": len(self.views.skipped)}

@@ -7,6 +7,9 @@ views, the first view being the anchor, either in-process (``--mode offline``) o
 views to the estimator node over ROS (``--mode replay``). Writes report.json, report.md and
 cameras_<sample>.png into ``--out``.
 
+With ``--baselines colmap features`` the classical baselines (``idpose_core.baselines``) run on the same
+views of every estimate and get their own rows, with convergence counts and seconds per estimate.
+
 In Python, ``evaluate_bag(bag, estimator, ground_truth, protocol)`` returns a ``BagEvaluation`` and
 ``bag_report.write_report`` writes it: build the estimator once (``make_estimator``) for many bags.
 """
@@ -16,14 +19,17 @@ import argparse
 import math
 import sys
 import time
+import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
+from idpose_core.baselines import BASELINES, run_baseline
+from idpose_core.baselines.scoring import score_baseline
 from idpose_core.cameras import c2w_to_spherical
 from idpose_core.evaluation import (
     PICK_SIZE,
@@ -38,7 +44,14 @@ from idpose_core.solver import Progress
 from idpose_core.zero123 import ModelLoadError
 from idpose_ros.bag_io import BagError
 from idpose_ros.bag_report import write_report
-from idpose_ros.bag_views import BagViews, ExtraTopics, ViewMessages, load_view_messages, read_bag_views
+from idpose_ros.bag_views import (
+    BagViews,
+    ExtraTopics,
+    ViewMessages,
+    default_camera_info_topic,
+    load_view_messages,
+    read_bag_views,
+)
 from idpose_ros.estimators import (
     NODE_BOUNDS,
     ViewSetEstimator,
@@ -47,6 +60,7 @@ from idpose_ros.estimators import (
     make_estimator,
 )
 from idpose_ros.replay import ReplayError
+from idpose_ros.view_inputs import view_input
 
 RANDOM_DRAWS = 200  # random-pose guesses per scored pair: the baseline row of the report
 
@@ -66,6 +80,12 @@ class GroundTruthOptions:
     extras: ExtraTopics = ExtraTopics()
 
     @property
+    def inputs(self) -> ExtraTopics:
+        """``extras`` with the CameraInfo topic beside the image topic unless one is named (optional either way)."""
+        topic = self.extras.camera_info_topic or default_camera_info_topic(self.image_topic)
+        return replace(self.extras, camera_info_topic=topic)
+
+    @property
     def description(self) -> str:
         return (f"PoseStamped on {self.gt_topic} (within {self.gt_tolerance:g} s)" if self.gt_topic
                 else f"/tf + /tf_static ({self.world_frame} -> image frame, at the image stamp)")
@@ -83,7 +103,8 @@ class EvaluationProtocol:
 @dataclass
 class BagEvaluation:
     """What ``evaluate_bag`` measured on one bag: per-pair records, per-estimate rows, per-sample cameras,
-    the random-pose baseline on the same pairs, and what produced them (``report.json`` holds it all)."""
+    the random-pose baseline and the classical ``baselines`` on the same pairs (their records and rows by
+    name), and what produced them (``report.json`` holds it all)."""
 
     bag: Path
     ground_truth: GroundTruthOptions
@@ -97,6 +118,9 @@ class BagEvaluation:
     estimates: list[dict[str, Any]] = field(default_factory=list)
     true_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> (k, 4, 4) OpenGL c2w
     predicted_cameras: dict[int, np.ndarray] = field(default_factory=dict)  # sample -> largest n's
+    baselines: tuple[str, ...] = ()
+    baseline_records: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    baseline_estimates: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     seconds: float = 0.0
 
     @property
@@ -115,6 +139,9 @@ class BagEvaluation:
         self.estimates.append(outcome.row)
         self.true_cameras[task.sample] = task.true_c2w
         self.predicted_cameras[task.sample] = outcome.predicted_c2w
+        for name, (records, row) in outcome.baselines.items():
+            self.baseline_records.setdefault(name, []).extend(records)
+            self.baseline_estimates.setdefault(name, []).append(row)
 
 
 def usable_view_counts(requested: Sequence[int], pool_size: int) -> list[int]:
@@ -154,13 +181,15 @@ class EstimateTask:
 
 @dataclass(frozen=True)
 class EstimateOutcome:
-    """What one estimate adds to the evaluation: pair records, random-baseline records, the estimate's row
-    and the predicted cameras (n, 4, 4), the anchor's true one first."""
+    """What one estimate adds to the evaluation: pair records, random-baseline records, the estimate's row,
+    the predicted cameras (n, 4, 4), the anchor's true one first, and per classical baseline its (pair
+    records, row) on the same views."""
 
     records: list[dict[str, Any]]
     random_records: list[dict[str, Any]]
     row: dict[str, Any]
     predicted_c2w: np.ndarray
+    baselines: dict[str, tuple[list[dict[str, Any]], dict[str, Any]]] = field(default_factory=dict)
 
 
 def plan_tasks(views: BagViews, ground_truth: GroundTruthOptions, protocol: EvaluationProtocol
@@ -186,8 +215,9 @@ def tasks_for_picks(picks: Sequence[Sequence[int]], true_cameras: Sequence[np.nd
 
 
 def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, views: Sequence[ViewMessages],
-                 progress: Progress | None = None) -> EstimateOutcome:
-    """Estimate the task's views (its first n, anchor first) and score them against the truth."""
+                 progress: Progress | None = None, baselines: Sequence[str] = ()) -> EstimateOutcome:
+    """Estimate the task's views (its first n, anchor first) and score them against the truth; then the same for
+    each named classical baseline (``idpose_core.baselines.BASELINES``)."""
     true_c2w = task.true_c2w[:task.n]
     anchor_polar_deg, distance = anchor_geometry(true_c2w)
     estimate = estimator(views, anchor_polar_deg, distance, progress)
@@ -198,7 +228,29 @@ def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, views: Sequenc
     row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "seconds": estimate.seconds,
            "anchor_polar_deg": anchor_polar_deg, "object_distance": distance, "details": estimate.details}
     predicted = world_cameras(estimate.poses, true_c2w[0])
-    return EstimateOutcome(records, random_baseline(true_c2w, task.baseline_seed), row, predicted)
+    return EstimateOutcome(records, random_baseline(true_c2w, task.baseline_seed), row, predicted,
+                           {name: classical_baseline(name, task, views) for name in baselines})
+
+
+def classical_baseline(name: str, task: EstimateTask, views: Sequence[ViewMessages]
+                       ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """(pair records, row) of the baseline ``name`` on the task's views (their intrinsics from the anchor's
+    CameraInfo when there is one); a view it cannot place gets a random guess (``score_baseline``) seeded by
+    the task and the anchor image, so that bags of different objects seen from the same cameras draw
+    different guesses."""
+    true_c2w = task.true_c2w[:task.n]
+    anchor_polar_deg, distance = anchor_geometry(true_c2w)
+    inputs = [view_input(view.image, camera_info=view.camera_info) for view in views]
+    estimate = run_baseline(name, [(view.rgb, view.alpha) for view in inputs], inputs[0].intrinsics, distance)
+    rng = np.random.default_rng([task.seed, task.index, task.n, 1 + list(BASELINES).index(name),
+                                 zlib.crc32(bytes(views[0].image.data))])
+    records = [{"sample": task.sample, "n": task.n, "anchor_view": task.pick[0], "view": target, **record,
+                "seconds": estimate.seconds}
+               for target, record in zip(task.pick[1:task.n], score_baseline(
+                   estimate, true_c2w, math.radians(anchor_polar_deg), distance, rng))]
+    row = {"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]), "status": estimate.status,
+           "registered": [int(v) for v, ok in zip(task.pick, estimate.registered) if ok], "seconds": estimate.seconds}
+    return records, row
 
 
 def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str, Any]]:
@@ -212,7 +264,7 @@ def random_baseline(true_c2w: np.ndarray, seed: Sequence[int]) -> list[dict[str,
 def read_views(bag: Path, ground_truth: GroundTruthOptions) -> BagViews:
     """The bag's views with their ground truth; BagError for an unreadable bag or a missing topic."""
     gt = ground_truth
-    return read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance, gt.extras)
+    return read_bag_views(bag, gt.image_topic, gt.world_frame, gt.gt_topic, gt.gt_tolerance, gt.inputs)
 
 
 def require_usable(views: BagViews, image_topic: str) -> None:
@@ -225,12 +277,17 @@ def require_usable(views: BagViews, image_topic: str) -> None:
 
 def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTruthOptions = GroundTruthOptions(),
                  protocol: EvaluationProtocol = EvaluationProtocol(), views: BagViews | None = None,
-                 show_progress: bool = True) -> BagEvaluation:
-    """Estimate the first n views of each seeded pick of the bag's posed views and score every pair.
+                 show_progress: bool = True, baselines: Sequence[str] = ()) -> BagEvaluation:
+    """Estimate the first n views of each seeded pick of the bag's posed views and score every pair; the
+    named classical ``baselines`` run on the same views of every estimate.
 
     ``views`` are ``read_views(bag, ground_truth)`` when already read. Raises ``BagError`` for an
-    unreadable bag, a missing topic or fewer than 2 usable views, and whatever the estimator raises.
+    unreadable bag, a missing topic or fewer than 2 usable views, ValueError for an unknown baseline,
+    and whatever the estimator raises.
     """
+    unknown = [name for name in baselines if name not in BASELINES]
+    if unknown:
+        raise ValueError(f"unknown baseline {unknown[0]!r}: choose from {', '.join(BASELINES)}")
     started = time.perf_counter()
     gt = ground_truth
     views = views or read_views(bag, gt)
@@ -239,8 +296,8 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
     run = BagEvaluation(bag=Path(bag), ground_truth=gt, protocol=protocol,
                         estimator={**estimator.description, "node_parameters": estimator.values}, views=views,
                         picks=list({task.sample: list(task.pick) for task in tasks}.values()),
-                        view_counts=sorted({task.n for task in tasks}))
-    messages = load_view_messages(bag, gt.image_topic, {v for task in tasks for v in task.pick}, views, gt.extras)
+                        view_counts=sorted({task.n for task in tasks}), baselines=tuple(baselines))
+    messages = load_view_messages(bag, gt.image_topic, {v for task in tasks for v in task.pick}, views, gt.inputs)
     with tqdm(total=len(tasks), desc="estimating", unit="set", file=sys.stderr, disable=not show_progress) as bar:
         for task in tasks:
             label = f"sample {task.sample}, {task.n} views"
@@ -251,7 +308,8 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
                     bar.set_postfix_str(text)
 
             bar.set_postfix_str(label)
-            run.add(task, run_estimate(estimator, task, [messages[v] for v in task.pick[:task.n]], progress))
+            run.add(task, run_estimate(estimator, task, [messages[v] for v in task.pick[:task.n]], progress,
+                                       baselines))
             bar.update()
     run.seconds = time.perf_counter() - started
     return run
@@ -273,7 +331,10 @@ def add_ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("the views' other inputs (each matched to the image by stamp)")
     group.add_argument("--depth-topic", default=None,
                        help="aligned depth Image (16UC1 mm or 32FC1 m): segments the object, gives its distance")
-    group.add_argument("--camera-info-topic", default=None, help="CameraInfo of the colour camera (needed by depth)")
+    group.add_argument("--camera-info-topic", default=None,
+                       help="CameraInfo of the colour camera, the nearest in time to each view (needed by depth; "
+                            "default: the image topic's camera_info when the bag has it; without, the baselines "
+                            "assume a 60 deg field of view)")
     group.add_argument("--mask-topic", default=None, help="object masks (mono8) from a segmentation node")
     group.add_argument("--gravity-topic", default=None,
                        help="sensor_msgs/Imu, or the optical frame's orientation in a z-up frame "
@@ -313,6 +374,8 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationPr
     parser.add_argument("bag", type=Path, help="rosbag2 bag: a folder with metadata.yaml, or a .mcap/.db3 file")
     parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
     add_protocol_arguments(parser)
+    parser.add_argument("--baselines", nargs="+", choices=tuple(BASELINES), default=[], metavar="NAME",
+                        help=f"classical baselines on the same views: {', '.join(BASELINES)}")
     add_ground_truth_arguments(parser)
     add_estimator_arguments(parser)
     args = parser.parse_args(argv)
@@ -343,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"evaluate_bag: {len(views.pool)} usable views: evaluating sets of {', '.join(map(str, counts))} "
                   "views only", file=sys.stderr)
         estimator = make_estimator(options)
-        evaluation = evaluate_bag(args.bag, estimator, ground_truth, protocol, views)
+        evaluation = evaluate_bag(args.bag, estimator, ground_truth, protocol, views, baselines=args.baselines)
     except (BagError, ModelLoadError, ReplayError, ValueError) as err:
         print(f"evaluate_bag: error: {err}", file=sys.stderr)
         return 2

@@ -35,6 +35,7 @@ from idpose_core.synthetic.scenes import (
     demo_objects,
     random_camera_spheres,
     rolled_optical_frames,
+    textured_objects,
     unseen_objects,
 )
 from idpose_core.synthetic.tabletop import TabletopRenderer, random_layout, tabletop_cameras
@@ -53,7 +54,7 @@ IMU_PERIOD_NS = 5_000_000  # 200 Hz
 IMU_NOISE = 0.05  # m/s^2, per axis and sample
 GRAVITY = 9.80665
 LINK_FROM_IMU = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, -0.01], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-OBJECT_SETS = {"demo": demo_objects, "unseen": unseen_objects}
+OBJECT_SETS = {"demo": demo_objects, "unseen": unseen_objects, "textured": textured_objects}
 SCENES = ("plain", "tabletop")
 TABLETOP_SIZE = 320  # px: the target covers about a sixth of the width
 

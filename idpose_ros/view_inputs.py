@@ -12,7 +12,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from idpose_core.view_input import ViewInput
 from msg_adapters import (
     AdapterError,
-    camera_info_intrinsics,
+    camera_info_to_matrix,
     compressed_to_rgb,
     image_to_depth,
     image_to_mask,
@@ -45,7 +45,7 @@ def with_inputs(view: ViewInput, depth: Image | None = None, mask: Image | None 
         if (camera_info.width, camera_info.height) not in ((width, height), (0, 0)):
             raise AdapterError(f"CameraInfo is for {camera_info.width}x{camera_info.height} images, the image is "
                                f"{width}x{height}")
-        changes["intrinsics"] = camera_info_intrinsics(camera_info)
+        changes["intrinsics"] = camera_info_to_matrix(camera_info)
     if gravity_up is not None:
         changes["gravity_up"] = np.asarray(gravity_up, dtype=np.float64)
     if roi is not None:

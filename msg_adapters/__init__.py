@@ -5,6 +5,7 @@ Imports numpy, OpenCV and the ROS message packages only (no torch, no idpose_cor
 node's message handling can be tested and reused without a model.
 """
 
+from msg_adapters.camera_info import camera_info_to_matrix
 from msg_adapters.compressed import compressed_to_rgb
 from msg_adapters.depth import depth_to_image, image_to_depth, image_to_mask
 from msg_adapters.encodings import Encoding, lookup_encoding
@@ -13,14 +14,14 @@ from msg_adapters.image_size import ImageTooLarge, encoded_size
 from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
 from msg_adapters.markers import camera_markers
 from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_array
-from msg_adapters.sensors import camera_info_intrinsics, imu_acceleration, orientation_rotation
+from msg_adapters.sensors import imu_acceleration, orientation_rotation
 
 __all__ = [
     "AdapterError",
     "Encoding",
     "ImageTooLarge",
     "array_to_image",
-    "camera_info_intrinsics",
+    "camera_info_to_matrix",
     "camera_markers",
     "compressed_to_rgb",
     "depth_to_image",

@@ -1,19 +1,10 @@
-"""What the robot knows about a view, from its messages: intrinsics (CameraInfo), gravity (Imu), orientation."""
+"""What the robot knows about a view, from its messages: gravity (Imu) and the camera's orientation."""
 import numpy as np
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
-from sensor_msgs.msg import CameraInfo, Imu
+from sensor_msgs.msg import Imu
 
 from msg_adapters.errors import AdapterError
 from msg_adapters.quaternions import quaternion_to_rotation
-
-
-def camera_info_intrinsics(msg: CameraInfo) -> np.ndarray:
-    """K (3, 3) of a CameraInfo; AdapterError when it is unset (all zeros) or not a camera matrix."""
-    k = np.asarray(msg.k, dtype=np.float64).reshape(3, 3)
-    if not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0 or k[2, 2] != 1.0:
-        raise AdapterError("CameraInfo.k is not a camera matrix (positive focal lengths, k[8] = 1): "
-                           f"{k.ravel().tolist()}")
-    return k
 
 
 def imu_acceleration(msg: Imu) -> np.ndarray:

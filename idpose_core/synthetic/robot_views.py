@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.transforms import invert_transform
 
 # The optical frame's axes in camera_link: x_opt = -y_link, y_opt = -z_link, z_opt = x_link.
@@ -24,8 +25,7 @@ LINK_FROM_OPTICAL = np.array([
 
 def pinhole_intrinsics(size: int, fov_deg: float) -> np.ndarray:
     """Camera matrix K (3, 3) of a square ``size`` x ``size`` image with a ``fov_deg`` field of view."""
-    focal = 0.5 * size / math.tan(math.radians(fov_deg) / 2.0)
-    return np.array([[focal, 0.0, 0.5 * size], [0.0, focal, 0.5 * size], [0.0, 0.0, 1.0]])
+    return pinhole_camera_matrix(size, size, fov_deg)
 
 
 def robot_chain(world_from_optical: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

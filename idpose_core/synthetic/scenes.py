@@ -307,3 +307,26 @@ def symmetric_objects() -> list[ObjectSpec]:
                            Part("cube.obj", rgba=(0.90, 0.20, 0.15, 1.0), scale=(0.3, 0.5, 0.7))),
                    symmetry_order=2),
     ]
+
+
+def textured_objects() -> list[ObjectSpec]:
+    """Objects covered in detailed textures, without symmetry: material for feature matching (SIFT, COLMAP).
+
+    A cube with a numbered label on every face, a duck wrapped in a labelled UV grid, and boxes printed
+    with a motor picture carrying one of the others (which breaks the box's half-turn symmetry).
+    """
+    numbered = "jenga/jenga.obj", "jenga/jenga.png"
+    motor = "quadruped/t-motor.jpg"
+    return [
+        ObjectSpec("numbered_cube", (Part(numbered[0], texture=numbered[1]),)),
+        ObjectSpec("uv_duck", (Part("duck.obj", texture="uvmap.png", orientation_deg=(90, 0, 0)),)),
+        ObjectSpec("motor_crate", (
+            Part("cube.obj", texture=motor, scale=(1.0, 0.7, 0.5)),
+            Part(numbered[0], texture=numbered[1], scale=(0.3, 0.3, 0.3), position=(0.3, 0.2, 0.4)),
+        )),
+        ObjectSpec("duck_on_crate", (
+            Part("cube.obj", texture=motor, scale=(1.0, 0.8, 0.4)),
+            Part("duck.obj", texture="uvmap.png", orientation_deg=(90, 0, 0), scale=(0.35, 0.35, 0.35),
+                 position=(0.0, 0.0, 0.2)),
+        )),
+    ]
