@@ -108,17 +108,19 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     return Plane(normal, float(-normal @ centre))
 
 
-def _pieces(above: np.ndarray, depth: np.ndarray) -> tuple[int, np.ndarray]:
-    """Connected pieces of ``above`` that no depth jump crosses: (count, labels)."""
-    z = np.where(above, depth, 0.0)
+def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[int, np.ndarray]:
+    """Connected pieces of ``above`` that no depth jump crosses: (count, labels). Holes in the depth (no reading)
+    that ``above`` pixels close around count as part of the piece."""
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    closed = cv2.morphologyEx(above.astype(np.uint8), cv2.MORPH_CLOSE, kernel).astype(bool)
+    above = above | (closed & ~valid)
     jump = np.zeros_like(above)
     for axis in (0, 1):
-        step = np.abs(np.diff(z, axis=axis)) > DEPTH_JUMP * np.maximum(
-            np.minimum(z[:-1] if axis == 0 else z[:, :-1], z[1:] if axis == 0 else z[:, 1:]), 1e-6)
-        if axis == 0:
-            jump[:-1] |= step
-        else:
-            jump[:, :-1] |= step
+        first = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+        second = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+        both = valid[first] & valid[second]
+        nearer = np.minimum(depth[first], depth[second])
+        jump[first] |= both & (np.abs(depth[first] - depth[second]) > DEPTH_JUMP * nearer)
     count, labels = cv2.connectedComponents((above & ~jump).astype(np.uint8), connectivity=4)
     return count, labels
 
@@ -197,7 +199,7 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(seed))
     height = plane.height(points)
     above = valid & (height > _tolerance(points[valid], MIN_HEIGHT, 0.015))
-    count, labels = _pieces(above, np.where(valid, view.depth, 0.0))
+    count, labels = _pieces(above, np.where(valid, view.depth, 0.0), valid)
     piece = _fill_holes(target_piece(labels, count, view.roi))
     on_plane = valid & (np.abs(height) < _tolerance(points[valid], PLANE_TOLERANCE, 0.01))
     mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
@@ -207,10 +209,12 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
 def object_distance(view: ViewInput, mask: np.ndarray) -> float:
     """Camera to object centre (m) from the depth of the object's visible points.
 
-    The visible surface lies in front of the centre: for a ball of radius r its mean depth is
-    ``D - 2r/3`` while it spans ``2r`` across, so the centre is taken at the visible points' mean
-    distance plus a third of their extent across the view (5th to 95th percentile). Exact for a ball,
-    within a sixth of the size for a box seen face on. DepthSegmentationError without readings.
+    The visible surface lies in front of the centre: for a ball of radius r seen from afar its mean depth
+    is ``D - 2r/3`` while it spans ``2r`` across, so the centre is taken at the visible points' mean
+    distance plus a third of their extent across the view (5th to 95th percentile along its widest
+    axis). On the synthetic tabletop views this is 2 % off the true distance on average, 5 % at worst
+    (``bench/tabletop.py``); a ball of 10 cm at 60 cm comes out 4 % short (the trimmed extent is less
+    than the diameter). DepthSegmentationError without readings.
     """
     if view.depth is None or view.intrinsics is None:
         raise DepthSegmentationError("the object distance needs a depth image and the camera intrinsics")

@@ -40,6 +40,15 @@ def up_from_orientation(upright_from_optical: np.ndarray) -> np.ndarray:
     return unit(np.asarray(upright_from_optical, dtype=np.float64).T @ np.array([0.0, 0.0, 1.0]))
 
 
+def level_from_optical(up: np.ndarray) -> np.ndarray:
+    """An orientation (3, 3) of the optical frame in a frame whose +z is up that carries exactly the gravity ``up``
+    (its heading is arbitrary): ``up_from_orientation`` gives ``up`` back."""
+    third = unit(up)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(third[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    first = unit(np.cross(helper, third))
+    return np.stack([first, np.cross(third, first), third])
+
+
 def roll_angle(up: np.ndarray) -> float:
     """The turn (radians) about the optical axis that makes the camera upright: afterwards up has no x
     component and a negative y component (it points to the top of the image). 0 when already upright."""

@@ -67,6 +67,15 @@ SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 IMU_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
+def inputs_used(view: View) -> str:
+    """", with depth, gravity" etc. for the inputs a kept view has (and ", depth pending" for those still to come)."""
+    have = [name for name, value in (("mask", view.input.mask), ("depth", view.input.depth),
+                                     ("intrinsics", view.input.intrinsics), ("gravity", view.input.gravity_up),
+                                     ("roi", view.input.roi)) if value is not None]
+    pending = [f"{kind} pending" for kind in sorted(view.pending)]
+    return "".join(f", {item}" for item in (["with " + ", ".join(have)] if have else []) + pending)
+
+
 class EstimatorNode(Node):
     """The `idpose_estimator` node; see the README section "The estimator node"."""
 
@@ -265,7 +274,7 @@ class EstimatorNode(Node):
             response.success, response.message = False, str(exc)
             return response
         self._kept(view, count, node_settings(current_values(self)))
-        response.success, response.message = True, f"captured view {count} ({view.source})"
+        response.success, response.message = True, f"captured view {count} ({view.source}{inputs_used(view)})"
         return response
 
     def _estimate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

@@ -19,26 +19,29 @@ from typing import Any
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray
+from geometry_msgs.msg import PoseArray, QuaternionStamped
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.logging import LoggingSeverity, set_logger_level
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
 from idpose_core.evaluation import PICK_SIZE, ViewSetEstimate
+from idpose_core.gravity import level_from_optical
 from idpose_core.solver import Progress
 from idpose_ros.bag_views import ViewMessages
 from idpose_ros.diagnostics import RUNNING_STATES, STATUS_NAME
 from idpose_ros.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
-from msg_adapters import pose_to_matrix
+from msg_adapters import matrix_to_pose, pose_to_matrix
 
 SERVICE_TIMEOUT = 10.0  # s to wait for a service call, a subscriber or a parameter change
 CONNECT_TIMEOUT = 30.0  # s to wait for the node's services to appear (a node may still be starting)
 CAPTURE_RETRY = 0.05  # s between two ~/capture attempts while the image is on its way
 REPUBLISH_AFTER = 1.0  # s without the node receiving an image before it is published again
+INPUTS_SETTLE = 0.1  # s between publishing a view's other inputs and its image (they go on other DDS topics)
 IN_PROCESS_DIAGNOSTICS_PERIOD = 0.2  # s, for a node started here
 # Node parameters a replay sets besides the solver's; a running node gets its own values back on close().
 RUN_ID = re.compile(r"\(run (\d+)\)$")  # how the ~/estimate answer ends: "... (run 7)"
@@ -91,6 +94,9 @@ class ReplayEstimator:
         self._lock = threading.Lock()
         self._poses: PoseArray | None = None
         self._status: dict[str, str] | None = None
+        self._inputs = {kind: self._client.create_publisher(kind_type, f"{namespace}/{kind}", 10)
+                        for kind, kind_type in (("depth", Image), ("mask", Image), ("camera_info", CameraInfo),
+                                                ("camera_orientation", QuaternionStamped))}
         self._publishers = {
             Image: self._client.create_publisher(Image, f"{namespace}/image", qos_profile_sensor_data),
             CompressedImage: self._client.create_publisher(CompressedImage, f"{namespace}/image/compressed",
@@ -167,8 +173,29 @@ class ReplayEstimator:
         if not result.successful:
             raise ReplayError(f"the estimator node refused the parameters: {result.reason}")
 
-    def _capture(self, message: Image | CompressedImage) -> None:
-        """Publish one image and keep it with ~/capture, publishing again if it got lost on the way."""
+    def _publish_inputs(self, view: ViewMessages) -> list[str]:
+        """Publish the view's other inputs on the node's topics (gravity as the optical frame's orientation in a
+        z-up frame, stamped as the image); returns their kinds."""
+        stamp = view.image.header.stamp
+        sent = {"depth": view.depth, "mask": view.mask, "camera_info": view.camera_info}
+        if view.gravity_up is not None:
+            orientation = matrix_to_pose(np.block([[level_from_optical(view.gravity_up), np.zeros((3, 1))],
+                                                   [np.zeros((1, 3)), np.ones((1, 1))]])).orientation
+            sent["camera_orientation"] = QuaternionStamped(header=Header(stamp=stamp), quaternion=orientation)
+        for kind, message in sent.items():
+            if message is not None:
+                publisher = self._inputs[kind]
+                _wait(lambda publisher=publisher: publisher.get_subscription_count() > 0, SERVICE_TIMEOUT,
+                      f"the estimator to subscribe to {publisher.topic_name}")
+                publisher.publish(message)
+        return [kind for kind, message in sent.items() if message is not None]
+
+    def _capture(self, view: ViewMessages) -> None:
+        """Publish one view (its other inputs first, and let them arrive) and keep it with ~/capture, publishing
+        the image again if it got lost on the way. ReplayError when the node kept it without an input."""
+        message = view.image
+        if self._publish_inputs(view):
+            time.sleep(INPUTS_SETTLE)
         publisher = self._publishers[type(message)]
         _wait(lambda: publisher.get_subscription_count() > 0, SERVICE_TIMEOUT,
               f"the estimator to subscribe to {publisher.topic_name}")
@@ -179,6 +206,8 @@ class ReplayEstimator:
             while time.monotonic() < republish_at:
                 response = self._call("capture")
                 if response.success:
+                    if view.gravity_up is not None and "gravity" not in response.message:
+                        raise ReplayError(f"{self.node_name} kept a view without its gravity: {response.message}")
                     return
                 time.sleep(CAPTURE_RETRY)
         raise ReplayError(f"{self.node_name}/capture kept refusing the image published on {publisher.topic_name}: "
@@ -192,8 +221,8 @@ class ReplayEstimator:
                               "object_distance": float(object_distance), "capture_mode": "on_request",
                               "views_per_estimate": 0, "max_views": PICK_SIZE, "anchor_frame": ""})
         self._call("reset")
-        for message in messages:
-            self._capture(message)
+        for view in views:
+            self._capture(view)
         with self._lock:
             self._poses = None
         response = self._call("estimate")

@@ -12,10 +12,9 @@ import json
 import cv2
 import numpy as np
 import pytest
-import torch
 
-from idpose_core.synthetic.render_oracle import RenderOracle
-from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, random_camera_spheres
+from idpose_core.synthetic.render_oracle import IdentifyingOracle
+from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_ros import estimator_node, estimators, evaluate_bag
 from idpose_ros.bag_report import write_report
 from idpose_ros.estimators import EstimatorOptions, OfflineEstimator
@@ -30,38 +29,6 @@ ORACLE_OPTIONS = EstimatorOptions(preset="fast", solver_params=ORACLE_SOLVER)
 def node_values(preset: str, variant: str | None, overrides, image_size: int = 256) -> dict:
     return EstimatorOptions(preset=preset, variant=variant, solver_params=tuple(overrides),
                             image_size=image_size).node_values()
-
-
-def thumbnail(rgb: np.ndarray) -> np.ndarray:
-    """The object's bounding box (non-white pixels) resized to 16 x 16: the same at any zoom."""
-    ys, xs = np.nonzero(np.any(rgb < 250, axis=-1))
-    crop = rgb[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
-    return cv2.resize(crop, (16, 16), interpolation=cv2.INTER_AREA).astype(np.float32)
-
-
-class IdentifyingOracle:
-    """RenderOracle for whichever of the known cameras each incoming view was rendered from."""
-
-    def __init__(self, spec, cameras_sph: np.ndarray, size: int):
-        self.spec, self.cameras_sph = spec, cameras_sph
-        with SceneRenderer(spec, image_size=size) as renderer:
-            self.thumbnails = np.stack([thumbnail(renderer.render(*sph)[0]) for sph in cameras_sph])
-        self.num_train_timesteps = RenderOracle.num_train_timesteps
-        self.solver_defaults = RenderOracle.solver_defaults
-        self.oracle: RenderOracle | None = None
-        self.identified: list[list[int]] = []
-
-    def encode(self, images: torch.Tensor):
-        rgbs = ((images.permute(0, 2, 3, 1).numpy() + 1.0) * 127.5).round().astype(np.uint8)
-        distances = [np.abs(self.thumbnails - thumbnail(rgb)).mean(axis=(1, 2, 3)) for rgb in rgbs]
-        ids = [int(np.argmin(d)) for d in distances]
-        assert all(np.sort(d)[1] > 2 * d.min() for d in distances), "ambiguous view identification"
-        self.identified.append(ids)
-        self.oracle = RenderOracle(self.spec, self.cameras_sph[ids], step_deg=15.0)
-        return self.oracle.encode(images)
-
-    def noise_error(self, *args):
-        return self.oracle.noise_error(*args)
 
 
 @pytest.fixture(scope="module")

@@ -72,6 +72,7 @@ def test_a_chosen_value_equal_to_the_paper_default_still_wins():
 def test_chosen_settings_are_tracked_through_updates_and_unknown_names_refused():
     config = SolverConfig(seed=3).updated(probe_batch=2)
     assert config.chosen == {"seed", "probe_batch"} and (config.seed, config.probe_batch) == (3, 2)
+    assert config.updated(seed=4).seed == 4  # a chosen setting can be changed again
     assert SolverConfig.preset("fast").chosen == {"probe_batch", "keep_top", "refine_steps_per_view", "runner_up_steps"}
     with pytest.raises(TypeError, match="no settings \\['probe_time'\\]"):
         SolverConfig(probe_time=0.5)

@@ -73,7 +73,7 @@ class SolverConfig:
 
     def updated(self, **changes: Any) -> SolverConfig:
         """A copy with ``changes`` applied; they join the chosen settings."""
-        return SolverConfig(**{name: getattr(self, name) for name in self.chosen}, **changes)
+        return SolverConfig(**{**{name: getattr(self, name) for name in self.chosen}, **changes})
 
     @classmethod
     def preset(cls, name: str, **overrides) -> SolverConfig:

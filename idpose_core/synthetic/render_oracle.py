@@ -119,3 +119,44 @@ class RenderOracle:
         predicted_view = self.images(compose(views.conditioning["view_sph"][ref], pose))
         predicted_noise = (noisy - abar.sqrt() * predicted_view) / (1.0 - abar).sqrt()
         return (predicted_noise - noise).pow(2).mean(dim=(1, 2, 3))
+
+
+def thumbnail(rgb: np.ndarray) -> np.ndarray:
+    """The object's bounding box (non-white pixels) of a view on white, resized to 16 x 16: the same at any zoom."""
+    ys, xs = np.nonzero(np.any(rgb < 250, axis=-1))
+    crop = rgb[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    return cv2.resize(crop, (16, 16), interpolation=cv2.INTER_AREA).astype(np.float32)
+
+
+class IdentifyingOracle:
+    """A TEST FIXTURE for evaluating bags: the ``RenderOracle`` of whichever known cameras (upright, at
+    ``cameras_sph`` (K, 3)) the incoming preprocessed views were rendered from, told apart by thumbnails.
+
+    The cameras come from the bag's seed, not from its ground truth, so a perfect score also checks the
+    ground truth a bag reader finds. ``identified`` lists each estimate's view ids; ValueError when a
+    view looks like none of the cameras, or like two of them.
+    """
+
+    num_train_timesteps = NUM_TRAIN_TIMESTEPS
+    solver_defaults: Mapping[str, Any] = MappingProxyType({})
+
+    def __init__(self, spec: ObjectSpec, cameras_sph: np.ndarray, size: int):
+        self.spec, self.cameras_sph = spec, np.asarray(cameras_sph, dtype=np.float64)
+        with SceneRenderer(spec, image_size=size) as renderer:
+            self.thumbnails = np.stack([thumbnail(renderer.render(*sph)[0]) for sph in self.cameras_sph])
+        self.oracle: RenderOracle | None = None
+        self.identified: list[list[int]] = []
+
+    def encode(self, images: torch.Tensor) -> Views:
+        rgbs = ((images.permute(0, 2, 3, 1).numpy() + 1.0) * 127.5).round().astype(np.uint8)
+        distances = [np.abs(self.thumbnails - thumbnail(rgb)).mean(axis=(1, 2, 3)) for rgb in rgbs]
+        if not all(np.sort(d)[1] > 2 * d.min() for d in distances):
+            raise ValueError("ambiguous view identification: a view looks like two of the known cameras")
+        ids = [int(np.argmin(d)) for d in distances]
+        self.identified.append(ids)
+        self.oracle = RenderOracle(self.spec, self.cameras_sph[ids], step_deg=15.0)
+        return self.oracle.encode(images)
+
+    def noise_error(self, views: Views, ref: torch.Tensor, tgt: torch.Tensor, pose: torch.Tensor, t: torch.Tensor,
+                    noise: torch.Tensor) -> torch.Tensor:
+        return self.oracle.noise_error(views, ref, tgt, pose, t, noise)

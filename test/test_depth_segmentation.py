@@ -1,0 +1,113 @@
+"""Depth segmentation on synthetic depth images with known answers: plane, pieces, holes, no plane, distance."""
+import math
+
+import numpy as np
+import pytest
+
+from idpose_core.depth_segmentation import DepthSegmentationError, backproject, depth_cut, object_distance
+from idpose_core.preprocessing import foreground_mask
+from idpose_core.synthetic.robot_views import pinhole_intrinsics
+from idpose_core.view_input import ViewInput
+
+SIZE = 160
+K = pinhole_intrinsics(SIZE, 60.0)
+TILT = math.radians(50.0)  # the camera looks down at the table at 50 deg below the horizon
+TABLE = 0.6  # m from the camera to the table along the optical axis
+
+
+def rays() -> np.ndarray:
+    """Unit-depth rays (H, W, 3) of the pixels: (x, y, 1) in the optical frame."""
+    points, _ = backproject(np.ones((SIZE, SIZE)), K)
+    return points
+
+
+def table_scene(holes: float = 0.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Depth (H, W) of a table (the plane n . p = d, n pointing up and to the camera) with a box at the
+    image centre and another at the border; the centre box's true mask, and the table's up vector."""
+    up = np.array([0.0, -math.cos(TILT), -math.sin(TILT)])  # world up in the optical frame
+    offset = TABLE * math.sin(TILT)  # the camera's height above the table
+    r = rays()
+    depth = offset / np.clip(-(r @ up), 1e-6, None)  # where each ray meets the table
+    truth = np.zeros((SIZE, SIZE), bool)
+    for (row, col), half, name in (((80, 80), 14, "target"), ((70, 150), 12, "border")):
+        box = np.zeros((SIZE, SIZE), bool)
+        box[row - half:row + half, col - half:col + half] = True
+        depth = np.where(box, depth - 0.08, depth)  # the box's front stands 8 cm out of the table
+        if name == "target":
+            truth = box
+    rng = np.random.default_rng(seed)
+    if holes:
+        missing = rng.random((SIZE, SIZE)) < holes
+        depth = np.where(missing, np.where(rng.random((SIZE, SIZE)) < 0.5, 0.0, np.nan), depth)
+    return depth.astype(np.float32), truth, up
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / (a | b).sum())
+
+
+def view(depth: np.ndarray, up: np.ndarray | None = None, roi=None) -> ViewInput:
+    rgb = np.full((SIZE, SIZE, 3), 180, np.uint8)
+    return ViewInput(rgb, depth=depth, intrinsics=K, gravity_up=up, roi=roi)
+
+
+@pytest.mark.parametrize("with_gravity", [True, False])
+def test_the_plane_and_the_centre_piece_are_found(with_gravity):
+    depth, truth, up = table_scene()
+    cut = depth_cut(view(depth, up if with_gravity else None), refine=False)
+    assert iou(cut.depth_mask, truth) > 0.9
+    assert np.degrees(np.arccos(np.clip(cut.plane.normal @ up, -1, 1))) < 1.0
+    assert cut.plane.offset == pytest.approx(TABLE * math.sin(TILT), abs=0.005)
+
+
+def test_the_region_of_interest_picks_the_other_piece():
+    depth, truth, up = table_scene()
+    cut = depth_cut(view(depth, up, roi=(135, 55, 25, 30)), refine=False)
+    assert iou(cut.depth_mask, truth) < 0.1 and cut.depth_mask[70, 150]
+
+
+def test_holes_in_the_depth_do_not_lose_the_object():
+    depth, truth, up = table_scene(holes=0.2)
+    assert np.isnan(depth).any() and (depth == 0).any()
+    cut = depth_cut(view(depth, up), refine=False)
+    assert iou(cut.depth_mask, truth) > 0.85
+
+
+def test_no_plane_in_sight_falls_back_with_the_reason():
+    wall = np.full((SIZE, SIZE), 0.8, np.float32)  # a wall facing the camera: nothing to stand on
+    with pytest.raises(DepthSegmentationError, match="no support plane facing up"):
+        depth_cut(view(wall))
+    rgb = np.full((SIZE, SIZE, 3), 255, np.uint8)
+    rgb[60:100, 60:100] = (20, 40, 200)
+    mask, method, note = foreground_mask(ViewInput(rgb, depth=wall, intrinsics=K))
+    assert method == "threshold" and mask[80, 80] and "depth not used: no support plane facing up" in note
+    empty = np.zeros((SIZE, SIZE), np.float32)
+    mask, method, note = foreground_mask(ViewInput(rgb, depth=empty, intrinsics=K))
+    assert method == "threshold" and "depth not used: only 0 % of the depth image has readings" in note
+
+
+def test_an_external_mask_wins_over_alpha_and_depth():
+    depth, truth, up = table_scene()
+    external = np.zeros((SIZE, SIZE), bool)
+    external[10:30, 10:30] = True
+    alpha = np.where(truth, 255, 0).astype(np.uint8)
+    rgb = np.full((SIZE, SIZE, 3), 180, np.uint8)
+    mask, method, _ = foreground_mask(ViewInput(rgb, alpha, external, depth, K, up))
+    assert method == "mask" and np.array_equal(mask, external)
+    assert foreground_mask(ViewInput(rgb, alpha, None, depth, K, up))[1] == "alpha"
+    assert foreground_mask(ViewInput(rgb, None, None, depth, K, up))[1] == "depth"
+
+
+def test_the_distance_to_a_ball_is_its_centre():
+    """A ball of radius 10 cm 60 cm in front of the camera, depth rendered exactly."""
+    centre, radius = np.array([0.02, -0.01, 0.6]), 0.1
+    r = rays()
+    direction = r / np.linalg.norm(r, axis=-1, keepdims=True)
+    along = direction @ centre
+    gap = along ** 2 - (centre @ centre - radius ** 2)
+    hit = gap > 0
+    distance_along_ray = np.where(hit, along - np.sqrt(np.where(hit, gap, 0.0)), 0.0)
+    depth = (distance_along_ray * direction[..., 2]).astype(np.float32)
+    estimate = object_distance(ViewInput(np.zeros((SIZE, SIZE, 3), np.uint8), depth=depth, intrinsics=K), hit)
+    assert estimate == pytest.approx(np.linalg.norm(centre), rel=0.05)
+    assert estimate > np.linalg.norm(centre) - 0.5 * radius  # beyond the visible surface's mean (0.53 m)
