@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray
+from geometry_msgs.msg import PoseArray, Quaternion, QuaternionStamped
 from rcl_interfaces.msg import Log
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import MultiThreadedExecutor
@@ -340,3 +340,39 @@ def test_views_from_two_frames_are_flagged_and_an_empty_anchor_frame_falls_back(
     assert poses.header.frame_id == "idpose_anchor"
     assert h.logged("the anchor image has no header.frame_id and anchor_frame is not set: publishing the poses in "
                     "frame 'idpose_anchor'")
+
+
+def test_gravity_required_refuses_a_view_without_it_and_late_depth_is_attached(harness, object_views):
+    """With gravity: required, ~/capture refuses an image no orientation matches; one matched within
+    input_tolerance is kept upright-aware, and a depth image published after its view is attached."""
+    h = harness(capture_mode="on_request", gravity="required")
+    orientation = h.probe.create_publisher(QuaternionStamped, "camera_orientation", 10)
+    depth = h.probe.create_publisher(Image, "depth", 10)
+    h.wait_for(lambda: orientation.get_subscription_count() and depth.get_subscription_count(),
+               "the node's input subscriptions")
+    rgb, alpha = object_views[0]
+
+    def latest(msg: Image) -> Trigger.Response:
+        received = h.node.status().images_received
+        h.send(msg)
+        h.wait_for(lambda: h.node.status().images_received == received + 1, "the image to arrive")
+        return h.call("capture")
+
+    refused = latest(array_to_image(np.dstack([rgb, alpha]), "rgba8", header("cam", 10)))
+    assert not refused.success and "no Imu or orientation message received; gravity: required" in refused.message
+    level = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)  # an optical frame whose z is up: looking straight up
+    orientation.publish(QuaternionStamped(header=header("base", 20), quaternion=level))
+    h.wait_for(lambda: h.node._sync.live(h.node.get_clock().now().nanoseconds) >= {"orientation"},
+               "the orientation to arrive")
+    far = latest(array_to_image(np.dstack([rgb, alpha]), "rgba8", header("cam", 21)))
+    assert not far.success and "no orientation within 0.02 s of the image stamp" in far.message
+    depth.publish(array_to_image(np.full((64, 64), 500, np.uint16), "16UC1", header("cam", 30)))
+    h.wait_for(lambda: "depth" in h.node._sync.live(h.node.get_clock().now().nanoseconds), "a depth image")
+    orientation.publish(QuaternionStamped(header=header("base", 40), quaternion=level))
+    kept = latest(array_to_image(np.dstack([rgb, alpha]), "rgba8", header("cam", 40)))
+    assert kept.success and kept.message == "captured view 1 (Image rgba8, with gravity, depth pending)"
+    depth.publish(array_to_image(np.full((64, 64), 500, np.uint16), "16UC1", header("cam", 40)))
+    h.wait_for(lambda: not h.node._buffer.snapshot()[0].pending, "the late depth image to be attached")
+    view = h.node._buffer.snapshot()[0].input
+    np.testing.assert_allclose(view.gravity_up, [0.0, 0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(view.depth, 0.5)
