@@ -22,12 +22,10 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import cv2  # noqa: E402 (after the path setup)
 import numpy as np  # noqa: E402
 
+from bench.tabletop import iou, tabletop_views  # noqa: E402
 from idpose_core.depth_segmentation import depth_cut  # noqa: E402
 from idpose_core.preprocessing import grabcut_mask  # noqa: E402
-from idpose_ros.bag_views import ExtraTopics, load_view_messages, read_bag_views  # noqa: E402
-from idpose_ros.make_synthetic_bag import DEPTH_TOPIC, IMAGE_TOPIC, INFO_TOPIC, TRUE_MASK_TOPIC, make_bag  # noqa: E402
-from idpose_ros.view_inputs import view_input  # noqa: E402
-from msg_adapters import image_to_mask  # noqa: E402
+from idpose_ros.make_synthetic_bag import make_bag  # noqa: E402
 
 OUT = ROOT / "bench" / "results" / "masks_before_after.png"
 LION = ROOT.parent / "shared" / "reference" / "idpose-official" / "data" / "demo" / "lion"
@@ -47,20 +45,10 @@ def outlined(rgb: np.ndarray, mask: np.ndarray | None, label: str) -> np.ndarray
     return image
 
 
-def iou(mask: np.ndarray, truth: np.ndarray) -> float:
-    return float((mask & truth).sum() / max((mask | truth).sum(), 1))
-
-
 def tabletop_rows(name: str, count: int, seed: int, work: Path) -> list[np.ndarray]:
-    bag = make_bag(work / "bag", "mcap", "demo", name, count, seed, scene="tabletop")
-    extras = ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC, mask_topic=TRUE_MASK_TOPIC)
-    views = read_bag_views(bag, IMAGE_TOPIC, extras=extras)
-    messages = load_view_messages(bag, IMAGE_TOPIC, set(views.pool), views, extras)
     rows = []
-    for view_id in views.pool:
-        recorded = messages[view_id]
-        truth = image_to_mask(recorded.mask)
-        view = view_input(recorded.image, recorded.depth, None, recorded.camera_info)
+    for view_id, view, truth, _ in tabletop_views(make_bag(work / "bag", "mcap", "demo", name, count, seed,
+                                                          scene="tabletop")):
         grabcut, depth = grabcut_mask(view.rgb), depth_cut(view).mask
         rows.append(np.hstack([outlined(view.rgb, None, f"{name}, tabletop view {view_id}"),
                                outlined(view.rgb, grabcut, f"colour only (GrabCut): IoU {iou(grabcut, truth):.2f}"),

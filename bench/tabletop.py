@@ -25,6 +25,7 @@ import json
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,6 +38,7 @@ from idpose_core.depth_segmentation import backproject, depth_cut, object_distan
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.preprocessing import grabcut_mask  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
+from idpose_core.view_input import ViewInput  # noqa: E402
 from idpose_ros.bag_views import ExtraTopics, load_view_messages, read_bag_views  # noqa: E402
 from idpose_ros.estimators import EstimatorOptions, make_estimator  # noqa: E402
 from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions, evaluate_bag  # noqa: E402
@@ -67,17 +69,22 @@ def centroid_plus_half_extent(view, mask: np.ndarray) -> float:
     return float(np.linalg.norm(visible.mean(axis=0)) + 0.5 * np.subtract(*np.percentile(depths, [95, 5])))
 
 
-def masks_and_distances(bag: Path) -> list[dict]:
-    """Per view of a tabletop bag: the three masks' IoU and both distance statistics beside the truth."""
+def tabletop_views(bag: Path) -> Iterator[tuple[int, ViewInput, np.ndarray, float]]:
+    """(view id, the view with its depth and intrinsics, its true target mask, its true distance to the target)
+    of every view of a tabletop bag."""
     views = read_bag_views(bag, IMAGE_TOPIC, extras=TRUTH)
     messages = load_view_messages(bag, IMAGE_TOPIC, set(views.pool), views, TRUTH)
-    rows = []
     for view_id in views.pool:
         recorded = messages[view_id]
-        truth = image_to_mask(recorded.mask)
-        view = view_input(recorded.image, recorded.depth, None, recorded.camera_info)
+        yield (view_id, view_input(recorded.image, recorded.depth, None, recorded.camera_info),
+               image_to_mask(recorded.mask), float(np.linalg.norm(views.world_from_camera[view_id][:3, 3])))
+
+
+def masks_and_distances(bag: Path) -> list[dict]:
+    """Per view of a tabletop bag: the three masks' IoU and both distance statistics beside the truth."""
+    rows = []
+    for view_id, view, truth, true_distance in tabletop_views(bag):
         cut = depth_cut(view)
-        true_distance = float(np.linalg.norm(views.world_from_camera[view_id][:3, 3]))
         rows.append({"view": view_id, "iou_grabcut": iou(grabcut_mask(view.rgb), truth),
                      "iou_depth": iou(cut.depth_mask, truth), "iou_depth_grabcut": iou(cut.mask, truth),
                      "true_distance": true_distance,
