@@ -26,6 +26,7 @@ IMAGE_UP_MIN = 0.3  # without gravity: the normal's component towards the top of
 MIN_HEIGHT = 0.008  # m, or 1.5 % of the median depth when larger: standing on the plane
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
 MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
+CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
 GRABCUT_ITERATIONS = 4
 GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
 CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
@@ -126,8 +127,11 @@ def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[in
 
 
 def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] | None) -> np.ndarray:
-    """The target's piece (H, W) bool: most pixels inside ``roi``, else the centroid nearest the image centre
-    (pieces under ``MIN_PIECE_SHARE`` of the image ignored). DepthSegmentationError when none is left."""
+    """The target's piece (H, W) bool: the one with most pixels inside ``roi``; else, among the pieces that do not
+    touch the image border (if any), the largest of those whose centroid is within ``CENTRE_MARGIN`` of the one
+    nearest the image centre (a part standing on the target, split from it at a depth jump, is near the
+    centre too, and smaller). Pieces under ``MIN_PIECE_SHARE`` of the image are ignored; DepthSegmentationError
+    when none is left."""
     height, width = labels.shape
     areas = np.bincount(labels.ravel(), minlength=count)
     areas[0] = 0
@@ -140,12 +144,16 @@ def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] 
         inside = np.bincount(window.ravel(), minlength=count)[candidates]
         if inside.max() > 0:
             return labels == candidates[int(np.argmax(inside))]
+    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    inner = candidates[~np.isin(candidates, border)]
+    candidates = inner if len(inner) else candidates
     rows, cols = np.indices(labels.shape)
     sums_r = np.bincount(labels.ravel(), weights=rows.ravel(), minlength=count)
     sums_c = np.bincount(labels.ravel(), weights=cols.ravel(), minlength=count)
     centres = np.stack([sums_r[candidates], sums_c[candidates]], axis=1) / areas[candidates, None]
     offsets = np.linalg.norm((centres - [(height - 1) / 2, (width - 1) / 2]) / [height, width], axis=1)
-    return labels == candidates[int(np.argmin(offsets))]
+    central = candidates[offsets <= offsets.min() + CENTRE_MARGIN]
+    return labels == central[int(np.argmax(areas[central]))]
 
 
 def _fill_holes(mask: np.ndarray) -> np.ndarray:
