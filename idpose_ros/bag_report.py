@@ -170,11 +170,13 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         "random_baseline": {"guesses_per_pair": len(run.random_records) // max(len(run.records), 1),
                             "aggregates": random_aggregates},
         **({"baselines": baselines, "intrinsics": intrinsics_note(run)} if baselines else {}),
+        "failed_estimates": run.failures,
         "seconds": run.seconds,
     }
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     skipped = "".join(f"- view {item['view']} ({item['stamp']:.3f} s): {item['reason']}\n"
                       for item in report["views"]["skipped"])
+    failed = "".join(f"- sample {item['sample']}, views {item['views']}: {item['error']}\n" for item in run.failures)
     (out / "report.md").write_text(
         f"# Pose evaluation of `{run.bag}`\n\n"
         f"{method}, mode {mode}, model {model_name(model)}, solver preset {preset}. "
@@ -183,7 +185,8 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         f"evaluated on their first {', '.join(map(str, run.view_counts))} views; the first view is the anchor.\n"
         f"Ground truth: {report['ground_truth']}. {inputs_sentence(gt.extras, report['inputs']['used'])}"
         f"Views on {gt.image_topic}: {len(views.views)}, "
-        f"usable {len(views.pool)}, skipped {len(views.skipped)}.\n\n"
+        f"usable {len(views.pool)}, skipped {len(views.skipped)}. "
+        f"Estimates: {len(run.estimates)} scored, {len(run.failures)} failed.\n\n"
         f"{table}\n\n"
         "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance. "
         f"{RANDOM_METHOD}: each pair's target camera guessed uniformly on the sphere at the anchor's distance, "
@@ -193,9 +196,10 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
            "fewer views; the feature baseline placed only some pairs); a view a baseline could not place is "
            "scored as one uniform random guess. "
            f"Intrinsics: {report['intrinsics']}.\n" if baselines else "")
-        + (f"\n## Skipped views\n\n{skipped}" if skipped else ""))
-    for sample, pick in enumerate(run.picks):
-        predicted = run.predicted_cameras[sample]
+        + (f"\n## Skipped views\n\n{skipped}" if skipped else "")
+        + (f"\n## Failed estimates (not scored)\n\n{failed}" if failed else ""))
+    for sample, predicted in run.predicted_cameras.items():
+        pick = run.picks[sample]
         plot_cameras(out / f"cameras_{sample}.png", run.true_cameras[sample][:len(predicted)], predicted,
                      pick[:len(predicted)], f"sample {sample}: {len(predicted)} views, anchor view {pick[0]}")
     return table

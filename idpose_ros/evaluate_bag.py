@@ -40,6 +40,7 @@ from idpose_core.evaluation import (
     world_cameras,
 )
 from idpose_core.metrics import aggregate, random_pose_errors
+from idpose_core.preprocessing import PreprocessingError
 from idpose_core.solver import Progress
 from idpose_core.zero123 import ModelLoadError
 from idpose_ros.bag_io import BagError
@@ -121,6 +122,7 @@ class BagEvaluation:
     baselines: tuple[str, ...] = ()
     baseline_records: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     baseline_estimates: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    failures: list[dict[str, Any]] = field(default_factory=list)  # estimates refused for a view's content
     seconds: float = 0.0
 
     @property
@@ -142,6 +144,11 @@ class BagEvaluation:
         for name, (records, row) in outcome.baselines.items():
             self.baseline_records.setdefault(name, []).extend(records)
             self.baseline_estimates.setdefault(name, []).append(row)
+
+    def fail(self, task: EstimateTask, error: Exception) -> None:
+        """Record an estimate that could not run on its views (none of its pairs is scored)."""
+        self.failures.append({"sample": task.sample, "n": task.n, "views": list(task.pick[:task.n]),
+                              "error": str(error)})
 
 
 def usable_view_counts(requested: Sequence[int], pool_size: int) -> list[int]:
@@ -283,7 +290,8 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
 
     ``views`` are ``read_views(bag, ground_truth)`` when already read. Raises ``BagError`` for an
     unreadable bag, a missing topic or fewer than 2 usable views, ValueError for an unknown baseline,
-    and whatever the estimator raises.
+    and whatever the estimator raises, except that an estimate whose views cannot be prepared
+    (``PreprocessingError``: no plausible object in one of them) is recorded in ``failures`` and the run goes on.
     """
     unknown = [name for name in baselines if name not in BASELINES]
     if unknown:
@@ -308,8 +316,12 @@ def evaluate_bag(bag: Path, estimator: ViewSetEstimator, ground_truth: GroundTru
                     bar.set_postfix_str(text)
 
             bar.set_postfix_str(label)
-            run.add(task, run_estimate(estimator, task, [messages[v] for v in task.pick[:task.n]], progress,
-                                       baselines))
+            try:
+                run.add(task, run_estimate(estimator, task, [messages[v] for v in task.pick[:task.n]], progress,
+                                           baselines))
+            except PreprocessingError as err:  # one implausible view costs its estimate, not the run
+                run.fail(task, err)
+                bar.write(f"evaluate_bag: {label}: not estimated: {err}", file=sys.stderr)
             bar.update()
     run.seconds = time.perf_counter() - started
     return run
@@ -416,7 +428,11 @@ def main(argv: list[str] | None = None) -> int:
     table = write_report(args.out, evaluation)
     print(table)
     print(f"report: {args.out / 'report.md'}, {args.out / 'report.json'}")
-    return 0
+    if evaluation.failures:
+        total = len(evaluation.failures) + len(evaluation.estimates)
+        print(f"evaluate_bag: {len(evaluation.failures)} of {total} estimates failed (listed in the report)",
+              file=sys.stderr)
+    return 0 if evaluation.estimates else 1
 
 
 if __name__ == "__main__":

@@ -7,15 +7,18 @@ that the ground truth read from the bag (a TF chain, in the optical convention) 
 the images show. Reduced for speed: 10 views of 64 px, two picks, the solver's "fast" preset with
 30 refinement steps per view and learning rates for the oracle's steeper error.
 """
+import dataclasses
 import json
 
 import cv2
 import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
 
 from idpose_core.synthetic.render_oracle import IdentifyingOracle
 from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_ros import estimator_node, estimators, evaluate_bag
+from idpose_ros.bag_io import TYPESTORE, BagWriter
 from idpose_ros.bag_report import write_report
 from idpose_ros.estimators import EstimatorOptions, OfflineEstimator
 from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions
@@ -163,3 +166,42 @@ def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch)
         for key in ("rot_acc_15", "rot_acc_30", "pos_acc_0.2", "pairs"):
             assert offline["aggregates"][group][key] == replay["aggregates"][group][key]
     assert offline["aggregates"]["all"]["rot_acc_15"] == 1.0
+
+
+def copy_with_transparent_view(source, out, blank_index: int) -> None:
+    """Copy the bag, making the ``blank_index``-th image fully transparent (nothing to cut out: implausible)."""
+    with AnyReader([source], default_typestore=TYPESTORE) as reader, BagWriter(out, "sqlite3") as bag:
+        images = 0
+        for connection, stamp, raw in reader.messages():
+            if connection.topic == IMAGE_TOPIC:
+                if images == blank_index:
+                    image = TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+                    pixels = image.data.reshape(image.height, image.width, 4).copy()
+                    pixels[..., 3] = 0
+                    raw = TYPESTORE.serialize_cdr(dataclasses.replace(image, data=pixels.ravel()), connection.msgtype)
+                images += 1
+            bag.write(connection.topic, connection.msgtype, stamp, raw)
+
+
+def test_an_implausible_view_fails_its_estimates_only(tmp_path, demo_bag, oracle):
+    """Every estimate holding the transparent view is recorded as failed, with the reason; the others are scored,
+    the report lists the failures, and the command says so (exit 0 while something was scored)."""
+    protocol = EvaluationProtocol(samples=2, seed=0, view_counts=(2, 4))
+    views = evaluate_bag.read_views(demo_bag, GroundTruthOptions(IMAGE_TOPIC))
+    tasks = evaluate_bag.plan_tasks(views, GroundTruthOptions(IMAGE_TOPIC), protocol)
+    blank = tasks[0].pick[1]  # the first pick's second view: both of its estimates hold it
+    copy_with_transparent_view(demo_bag, tmp_path / "bag", blank)  # every image is a view: ids are indices
+    estimator = OfflineEstimator(oracle, ORACLE_OPTIONS.node_values())
+    run = evaluate_bag.evaluate_bag(tmp_path / "bag", estimator, GroundTruthOptions(IMAGE_TOPIC), protocol,
+                                    show_progress=False)
+    holding = [(t.sample, t.n) for t in tasks if blank in t.pick[:t.n]]
+    assert holding and len(holding) < len(tasks)
+    assert [(f["sample"], f["n"]) for f in run.failures] == holding
+    assert all(f"view {f['views'].index(blank)}: no object found" in f["error"] for f in run.failures)
+    assert [(e["sample"], e["n"]) for e in run.estimates] == [(t.sample, t.n) for t in tasks
+                                                              if (t.sample, t.n) not in holding]
+    assert run.aggregates["all"]["rot_acc_15"] == 1.0
+    write_report(tmp_path / "out", run)
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert [f["views"] for f in report["failed_estimates"]] == [f["views"] for f in run.failures]
+    assert "## Failed estimates (not scored)" in (tmp_path / "out" / "report.md").read_text()
