@@ -107,7 +107,8 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     started = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="idpose_gravity_") as folder:
-        result = {"arguments": {k: str(v) for k, v in vars(args).items()}, "accuracy": accuracy(args, Path(folder))}
+        result = {"arguments": {k: str(v) for k, v in vars(args).items() if k != "out"},
+                  "accuracy": accuracy(args, Path(folder))}
         if not args.skip_presets:
             result["cost"] = presets(args, Path(folder))
     result["minutes"] = (time.monotonic() - started) / 60
