@@ -146,7 +146,13 @@ def test_ctrl_c_then_a_rerun_resumes_to_the_uninterrupted_report(ray_instance, a
     command = [sys.executable, "-m", "idpose_ros.evaluate_dataset", *arguments, "--out", str(out),
                "--address", ray_instance, "--workers", "1"]  # one worker: the first estimate comes sooner
     with (tmp_path / "stderr.txt").open("w") as stderr:  # a file, not a pipe: nothing blocks the command's output
-        process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=stderr)
+        # A suite started in the background by a non-interactive shell ignores SIGINT, and an ignored signal stays
+        # ignored across exec: with Python's handler here instead, the command takes Ctrl-C as from a terminal.
+        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=stderr)
+        finally:
+            signal.signal(signal.SIGINT, previous)
         try:
             wait_for(lambda: any(line["status"] == "ok" for line in lines_of(out)), "a first estimate", timeout=100)
             process.send_signal(signal.SIGINT)
