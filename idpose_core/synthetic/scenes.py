@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 import pybullet
@@ -153,7 +154,26 @@ def rolled_optical_frames(spheres: np.ndarray, rolls: np.ndarray) -> np.ndarray:
     return opengl_to_optical(spherical_to_c2w(np.asarray(spheres, dtype=np.float64))) @ turns
 
 
-class SceneRenderer:
+class PybulletClient:
+    """One pybullet DIRECT client for a renderer's lifetime: a context manager, or call ``close()``."""
+
+    def __init__(self):
+        self._client: int | None = pybullet.connect(pybullet.DIRECT)
+
+    def close(self) -> None:
+        """Disconnect the pybullet client (idempotent)."""
+        if self._client is not None:
+            pybullet.disconnect(physicsClientId=self._client)
+            self._client = None
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class SceneRenderer(PybulletClient):
     """Renders one object from spherical camera poses in its own pybullet DIRECT client.
 
     ``render(polar, azimuth, radius)`` (radians) -> ``(rgb uint8 (H, W, 3) on white, mask bool
@@ -168,7 +188,7 @@ class SceneRenderer:
         self.spec = spec
         self.image_size = int(image_size)
         self.fov_deg = float(fov_deg)
-        self._client = pybullet.connect(pybullet.DIRECT)
+        super().__init__()
         add_object(self._client, spec)
 
     def render(self, polar: float, azimuth: float, radius: float = CAMERA_RADIUS, roll: float = 0.0
@@ -197,18 +217,6 @@ class SceneRenderer:
         mask = np.asarray(segmentation).reshape(size, size) >= 0
         rgb[~mask] = 255
         return rgb, mask
-
-    def close(self) -> None:
-        """Disconnect the pybullet client (idempotent)."""
-        if self._client is not None:
-            pybullet.disconnect(physicsClientId=self._client)
-            self._client = None
-
-    def __enter__(self) -> SceneRenderer:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def random_camera_spheres(rng: np.random.Generator, n: int, polar_deg: tuple[float, float] = (30.0, 150.0),

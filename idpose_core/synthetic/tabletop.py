@@ -19,6 +19,7 @@ from idpose_core.synthetic.scenes import (
     OBJECT_RADIUS,
     ObjectSpec,
     Part,
+    PybulletClient,
     _part_vertices,
     add_object,
     normalisation,
@@ -129,14 +130,14 @@ class TabletopFrame:
     target_mask: np.ndarray
 
 
-class TabletopRenderer:
+class TabletopRenderer(PybulletClient):
     """Renders a ``TabletopLayout`` from optical camera poses in its own pybullet DIRECT client (a context
     manager, or call ``close()``)."""
 
     def __init__(self, layout: TabletopLayout, image_size: int = 320, fov_deg: float = 60.0,
                  near: float = 0.05, far: float = 6.0):
         self.layout, self.image_size, self.fov_deg, self.near, self.far = layout, image_size, fov_deg, near, far
-        self._client = pybullet.connect(pybullet.DIRECT)
+        super().__init__()
         self._target = add_object(self._client, layout.target.spec, layout.target.centre, layout.target.radius,
                                   layout.target.yaw_deg)
         for placement in layout.distractors:
@@ -181,18 +182,6 @@ class TabletopRenderer:
         depth = self.far * self.near / (self.far - (self.far - self.near) * buffer)
         mask = np.asarray(segmentation).reshape(size, size) == self._target
         return TabletopFrame(rgb, depth.astype(np.float32), mask)
-
-    def close(self) -> None:
-        """Disconnect the pybullet client (idempotent)."""
-        if self._client is not None:
-            pybullet.disconnect(physicsClientId=self._client)
-            self._client = None
-
-    def __enter__(self) -> TabletopRenderer:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def tabletop_cameras(rng: np.random.Generator, count: int, polar_deg: tuple[float, float] = (45.0, 75.0),
