@@ -22,7 +22,7 @@ from idpose_core.gravity import GravityUnavailable, resting_acceleration, up_fro
 from idpose_core.transforms import TransformBuffer, TransformLookupError, quaternion_to_matrix
 from idpose_ros.bag_io import BagError, open_bag, topic_connections
 from idpose_ros.view_inputs import decode_image
-from msg_adapters import AdapterError, imu_acceleration, orientation_rotation, pose_to_matrix
+from msg_adapters import AdapterError, imu_acceleration, orientation_rotation, pose_to_matrix, stamp_nanoseconds
 
 IMAGE_TYPES = {"sensor_msgs/msg/Image": Image, "sensor_msgs/msg/CompressedImage": CompressedImage}
 TRANSPORTS = ("compressed", "compressedDepth", "theora", "zstd")  # image_transport's sub-topic suffixes
@@ -32,11 +32,6 @@ EXTRA_TYPES = {"depth": {"sensor_msgs/msg/Image": Image}, "mask": {"sensor_msgs/
                "camera_info": {"sensor_msgs/msg/CameraInfo": CameraInfo}}
 IMU_TYPE = "sensor_msgs/msg/Imu"
 GRAVITY_TYPES = {IMU_TYPE: Imu, POSE_TYPE: PoseStamped, "geometry_msgs/msg/QuaternionStamped": QuaternionStamped}
-
-
-def stamp_ns(stamp) -> int:
-    """builtin_interfaces Time (rclpy or rosbags) -> integer nanoseconds."""
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 @dataclass(frozen=True)
@@ -125,7 +120,7 @@ def _scan_images(reader, image_topic: str) -> tuple[list[ViewInfo], dict[int, st
             decode_image(message)
         except AdapterError as err:
             broken[view_id] = f"bad image: {err}"
-        views.append(ViewInfo(view_id, stamp_ns(message.header.stamp), message.header.frame_id.lstrip("/")))
+        views.append(ViewInfo(view_id, stamp_nanoseconds(message.header.stamp), message.header.frame_id.lstrip("/")))
     return views, broken
 
 
@@ -138,7 +133,7 @@ def _transform_buffer(reader) -> TransformBuffer:
             for item in reader.deserialize(raw, TF_TYPE).transforms:
                 t, q = item.transform.translation, item.transform.rotation
                 try:
-                    buffer.add(item.header.frame_id, item.child_frame_id, stamp_ns(item.header.stamp),
+                    buffer.add(item.header.frame_id, item.child_frame_id, stamp_nanoseconds(item.header.stamp),
                                np.array([t.x, t.y, t.z]), np.array([q.x, q.y, q.z, q.w]), static=static)
                 except ValueError as err:
                     raise BagError(f"{topic}: {err}") from None
@@ -170,7 +165,7 @@ def _ground_truth_from_topic(reader, views: list[ViewInfo], topic: str, world_fr
             matrices.append(pose_to_matrix(message.pose))
         except AdapterError as err:
             raise BagError(f"{topic}: {err}") from None
-        stamps.append(stamp_ns(message.header.stamp))
+        stamps.append(stamp_nanoseconds(message.header.stamp))
     matches = match_stamps([view.stamp for view in views], stamps, tolerance)
     poses = {view.view_id: matrices[index] for view, index in zip(views, matches) if index >= 0}
     skipped = {view.view_id: f"no ground truth: no {topic} pose within {tolerance * 1e-9:g} s of the image stamp "
@@ -182,7 +177,7 @@ def _read(reader, topic: str, types: dict[str, type]) -> Iterator[tuple[int, obj
     """(header stamp, message) of every message on ``topic``, which must carry one of ``types``, one at a time."""
     for connection, _, raw in reader.messages(connections=topic_connections(reader, topic, tuple(types))):
         message = deserialize_message(raw, types[connection.msgtype])
-        yield stamp_ns(message.header.stamp), message
+        yield stamp_nanoseconds(message.header.stamp), message
 
 
 def _gravity(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: TransformBuffer

@@ -36,7 +36,7 @@ from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_core.solver import Progress
 from idpose_ros.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array, result_inputs
 from idpose_ros.estimation_worker import EstimationWorker, Outcome
-from idpose_ros.input_sync import IMAGE_INPUTS, InputSync, stamp_ns
+from idpose_ros.input_sync import IMAGE_INPUTS, InputSync
 from idpose_ros.model_holder import ModelHolder
 from idpose_ros.parameters import (
     NodeSettings,
@@ -49,7 +49,14 @@ from idpose_ros.parameters import (
 from idpose_ros.raw_image import RawImage
 from idpose_ros.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
 from idpose_ros.view_inputs import with_inputs
-from msg_adapters import AdapterError, ImageTooLarge, array_to_image, camera_markers, poses_to_pose_array
+from msg_adapters import (
+    AdapterError,
+    ImageTooLarge,
+    array_to_image,
+    camera_markers,
+    poses_to_pose_array,
+    stamp_nanoseconds,
+)
 
 NODE_NAME = "idpose_estimator"
 SHUTDOWN_TIMEOUT = 1.5  # s to let a cancelled estimate stop on Ctrl-C (the node must exit within 2 s)
@@ -189,7 +196,8 @@ class EstimatorNode(Node):
         try:
             pixels = image.decode(node_settings(current_values(self)).max_image_pixels)
             height, width = pixels.rgb.shape[:2]
-            matched = self._sync.match(stamp_ns(image.stamp), (width, height), self.get_clock().now().nanoseconds)
+            now = self.get_clock().now().nanoseconds
+            matched = self._sync.match(stamp_nanoseconds(image.stamp), (width, height), now)
             if matched.gravity_problem:
                 if self._sync.gravity == "required":
                     raise ImageRefused(f"{name}: no gravity reading for it ({matched.gravity_problem}; gravity: "
@@ -217,13 +225,14 @@ class EstimatorNode(Node):
         self._sync.add_image(kind, msg, self.get_clock().now().nanoseconds)
 
         def fill(view: View) -> View | None:
-            if not self._sync.fits(kind, msg, stamp_ns(view.stamp)):
+            if not self._sync.fits(kind, msg, stamp_nanoseconds(view.stamp)):
                 return None
             try:
                 return replace(view, input=with_inputs(view.input, **{kind: msg}), pending=view.pending - {kind})
             except AdapterError as exc:
-                self.get_logger().warning(f"the {kind} image for a view taken at {stamp_ns(view.stamp) * 1e-9:.3f} s "
-                                          f"is not used: {exc}", throttle_duration_sec=THROTTLE)
+                taken = stamp_nanoseconds(view.stamp) * 1e-9
+                self.get_logger().warning(f"the {kind} image for a view taken at {taken:.3f} s is not used: {exc}",
+                                          throttle_duration_sec=THROTTLE)
                 return replace(view, pending=view.pending - {kind})
 
         self._buffer.complete(kind, fill)

@@ -20,17 +20,13 @@ from sensor_msgs.msg import CameraInfo, Image, Imu
 
 from idpose_core.evaluation import match_stamps
 from idpose_core.gravity import GravityUnavailable, resting_acceleration, up_from_acceleration, up_from_orientation
-from msg_adapters import imu_acceleration, orientation_rotation
+from msg_adapters import imu_acceleration, orientation_rotation, stamp_nanoseconds
 
 GRAVITY_MODES = ("off", "auto", "required")
 IMAGE_INPUTS = ("depth", "mask")
 IMAGE_HISTORY = 30  # depth / mask messages kept (a second at 30 Hz)
 IMU_HISTORY = 8000  # accelerometer readings kept (20 s at 400 Hz)
 ORIENTATION_HISTORY = 2000  # orientations kept
-
-
-def stamp_ns(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 @dataclass(frozen=True)
@@ -80,7 +76,7 @@ class InputSync:
         """A depth or mask image (kept undecoded)."""
         with self._lock:
             stream = self._streams[kind]
-            stream.items.append((stamp_ns(message.header.stamp), message))
+            stream.items.append((stamp_nanoseconds(message.header.stamp), message))
             stream.last_seen = now
 
     def add_camera_info(self, message: CameraInfo) -> None:
@@ -91,14 +87,14 @@ class InputSync:
         """An accelerometer reading; AdapterError for one without a direction."""
         reading = imu_acceleration(message)
         with self._lock:
-            self._imu.items.append((stamp_ns(message.header.stamp), reading))
+            self._imu.items.append((stamp_nanoseconds(message.header.stamp), reading))
             self._imu.last_seen = now
 
     def add_orientation(self, message: QuaternionStamped | PoseStamped, now: int) -> None:
         """The optical frame's orientation in a z-up frame; AdapterError for one that is not a rotation."""
         up = up_from_orientation(orientation_rotation(message))
         with self._lock:
-            self._orientation.items.append((stamp_ns(message.header.stamp), up))
+            self._orientation.items.append((stamp_nanoseconds(message.header.stamp), up))
             self._orientation.last_seen = now
 
     # ----- matching --------------------------------------------------------------------------------------------
@@ -118,7 +114,7 @@ class InputSync:
 
     def fits(self, kind: str, message: Image, stamp: int) -> bool:
         """Whether a newly arrived depth or mask message belongs to a view taken at ``stamp``."""
-        return abs(stamp_ns(message.header.stamp) - stamp) <= self.tolerance
+        return abs(stamp_nanoseconds(message.header.stamp) - stamp) <= self.tolerance
 
     def gravity_up(self, stamp: int) -> np.ndarray:
         """World up in the optical frame at ``stamp``: from the orientation topic when it has a reading within the

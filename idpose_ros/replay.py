@@ -35,7 +35,7 @@ from idpose_core.solver import Progress
 from idpose_ros.bag_views import ViewMessages
 from idpose_ros.diagnostics import RUNNING_STATES, STATUS_NAME
 from idpose_ros.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
-from msg_adapters import matrix_to_pose, pose_to_matrix
+from msg_adapters import matrix_to_pose, pose_to_matrix, stamp_nanoseconds
 
 SERVICE_TIMEOUT = 10.0  # s to wait for a service call, a subscriber or a parameter change
 CONNECT_TIMEOUT = 30.0  # s to wait for the node's services to appear (a node may still be starting)
@@ -59,10 +59,6 @@ def _wait(condition: Callable[[], bool], timeout: float, what: str) -> None:
         if time.monotonic() > deadline:
             raise ReplayError(f"timed out after {timeout:g} s waiting for {what}")
         time.sleep(0.01)
-
-
-def _stamp_ns(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 class ReplayEstimator:
@@ -234,12 +230,12 @@ class ReplayEstimator:
             self.timeout, f"finish estimate run {run[1]}", progress)
         if status["state"] == "failed" or status["last_error"]:
             raise ReplayError(f"the estimator node's run {run[1]} failed: {status['last_error'] or status['model']}")
-        anchor_stamp = _stamp_ns(messages[0].header.stamp)
+        anchor_stamp = stamp_nanoseconds(messages[0].header.stamp)
 
         def published() -> bool:  # the poses go out before the status says the run is over
             with self._lock:
                 return (self._poses is not None and len(self._poses.poses) == len(messages)
-                        and _stamp_ns(self._poses.header.stamp) == anchor_stamp)
+                        and stamp_nanoseconds(self._poses.header.stamp) == anchor_stamp)
 
         _wait(published, SERVICE_TIMEOUT, f"the poses of run {run[1]} on {self.node_name}/poses")
         with self._lock:

@@ -10,6 +10,7 @@ from msg_adapters.compressed import compressed_to_rgb
 from msg_adapters.depth import depth_to_image, image_to_depth, image_to_mask
 from msg_adapters.encodings import Encoding, lookup_encoding
 from msg_adapters.errors import AdapterError
+from msg_adapters.headers import stamp_nanoseconds
 from msg_adapters.image_size import ImageTooLarge, encoded_size
 from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
 from msg_adapters.markers import camera_markers
@@ -36,4 +37,5 @@ __all__ = [
     "orientation_rotation",
     "pose_to_matrix",
     "poses_to_pose_array",
+    "stamp_nanoseconds",
 ]

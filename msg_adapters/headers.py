@@ -1,4 +1,4 @@
-"""std_msgs/Header from a frame id and a stamp, checked."""
+"""std_msgs/Header from a frame id and a stamp, checked; a stamp as integer nanoseconds."""
 from builtin_interfaces.msg import Time
 from std_msgs.msg import Header
 
@@ -14,3 +14,8 @@ def make_header(frame_id: str, stamp) -> Header:
     if not isinstance(stamp, Time):
         raise AdapterError(f"stamp must be a builtin_interfaces.msg.Time or rclpy Time, got {type(stamp).__name__}")
     return Header(frame_id=frame_id, stamp=stamp)
+
+
+def stamp_nanoseconds(stamp) -> int:
+    """A builtin_interfaces Time (rclpy's or rosbags') as integer nanoseconds: exact, unlike float seconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
