@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from idpose_core.grabcut import grabcut_object
 from idpose_core.view_input import ViewInput
 
 RANSAC_ITERATIONS = 300
@@ -184,15 +185,10 @@ def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) ->
     margin = 2 * band
     top, left = max(0, y - margin), max(0, x - margin)
     bottom, right = min(seed.shape[0], y + h + margin), min(seed.shape[1], x + w + margin)
-    window = labels[top:bottom, left:right].copy()
     cv2.setRNGSeed(0)
-    cv2.grabCut(np.ascontiguousarray(rgb[top:bottom, left:right]), window, None, np.zeros((1, 65)),
-                np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
     refined = np.zeros(seed.shape, bool)
-    refined[top:bottom, left:right] = np.isin(window, (cv2.GC_FGD, cv2.GC_PR_FGD))
-    count, parts = cv2.connectedComponents(refined.astype(np.uint8), connectivity=8)
-    if count > 2:  # keep the part that holds the core
-        refined = parts == np.bincount(parts[core], minlength=count)[1:].argmax() + 1
+    refined[top:bottom, left:right] = grabcut_object(rgb[top:bottom, left:right], labels[top:bottom, left:right],
+                                                     GRABCUT_ITERATIONS)  # the part that holds the core
     return refined
 
 

@@ -23,6 +23,7 @@ import torch
 
 from idpose_core.cancellation import raise_if_cancelled
 from idpose_core.depth_segmentation import DepthSegmentationError, depth_cut
+from idpose_core.grabcut import grabcut_object
 from idpose_core.view_input import ViewInput, ViewInputError
 
 WHITE = (255, 255, 255)
@@ -133,13 +134,7 @@ def grabcut_mask(rgb: np.ndarray) -> np.ndarray:
     seeds = _grabcut_seeds(small)
     if np.mean(seeds == cv2.GC_FGD) < SURE_OBJECT_SHARE:  # nothing stands out from the border: no object
         return np.zeros((height, width), dtype=bool)
-    labels = seeds.copy()
-    cv2.grabCut(small, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_MASK)
-    foreground = np.isin(labels, (cv2.GC_FGD, cv2.GC_PR_FGD)).astype(np.uint8)
-    _, components = cv2.connectedComponents(foreground, connectivity=8)
-    sure_per_component = np.bincount(components[seeds == cv2.GC_FGD], minlength=components.max() + 1)
-    sure_per_component[0] = 0
-    mask = (components == int(np.argmax(sure_per_component))).astype(np.float32)
+    mask = grabcut_object(small, seeds, GRABCUT_ITERATIONS).astype(np.float32)
     return cv2.resize(mask, (width, height), interpolation=cv2.INTER_LINEAR) >= 0.5
 
 
