@@ -34,20 +34,17 @@ import torch  # noqa: E402
 
 from idpose_core.baselines import BASELINES, TITLES  # noqa: E402
 from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
+from idpose_core.evaluation.estimator import ViewSetEstimator
+from idpose_core.evaluation.protocol import EvaluationProtocol
+from idpose_core.evaluation.run import classical_baseline
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.synthetic.scenes import textured_objects  # noqa: E402
-from idpose_ros.bag_report import RANDOM_METHOD, write_report  # noqa: E402
-from idpose_ros.bag_views import load_view_messages  # noqa: E402
-from idpose_ros.estimators import EstimatorOptions, ViewSetEstimator, make_estimator  # noqa: E402
-from idpose_ros.evaluate_bag import (  # noqa: E402
-    EvaluationProtocol,
-    GroundTruthOptions,
-    classical_baseline,
-    evaluate_bag,
-    plan_tasks,
-    read_views,
-)
-from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
+from idpose_ros.dataset.synthetic_bag import SyntheticBagOptions, make_bag
+from idpose_ros.evaluation.bag_evaluation import evaluate_bag, plan_bag
+from idpose_ros.evaluation.bag_report import RANDOM_METHOD, write_report  # noqa: E402
+from idpose_ros.evaluation.bag_views import load_views
+from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 
 OUT = ROOT / "bench" / "results" / "baselines.json"
 ID_POSE = "ID-Pose (demo model)"
@@ -83,11 +80,12 @@ def baselines_only(bag: Path, samples: int) -> dict:
     """A report-like dict of the baselines alone on ``samples`` picks of the bag (n = 2 and 4)."""
     ground_truth = GroundTruthOptions()
     views = read_views(bag, ground_truth)
-    tasks = plan_tasks(views, ground_truth, EvaluationProtocol(samples, 0, (2, 4)))
-    messages = load_view_messages(bag, ground_truth.image_topic, {v for task in tasks for v in task.pick})
+    tasks = plan_bag(views, ground_truth, EvaluationProtocol(samples, 0, (2, 4)))
+    decoded, _ = load_views(bag, ground_truth.image_topic, {v for task in tasks for v in task.pick}, views,
+                            ground_truth.inputs)
     report: dict = {"bag": str(bag), "estimates": [], "baselines": {}}
     for name in BASELINES:
-        outcomes = [classical_baseline(name, task, [messages[v] for v in task.pick[:task.n]]) for task in tasks]
+        outcomes = [classical_baseline(name, task, [decoded[v] for v in task.views]) for task in tasks]
         report["baselines"][name] = {"pairs": [p for records, _ in outcomes for p in records],
                                      "estimates": [row for _, row in outcomes]}
     for task in tasks:  # the anchor's polar angle, for the angle between views
@@ -162,10 +160,9 @@ def main() -> None:
     bags = {"demo bags": sorted((ROOT / "data" / "demo_bags").iterdir()), "textured objects": []}
     for spec in textured_objects():
         bag = args.work_dir / "bags" / spec.name
-        if not bag.exists() and make_synthetic_bag([str(bag), "--objects", "textured", "--object", spec.name,
-                                                    "--views", "12", "--seed", str(args.seed), "--size",
-                                                    str(args.size)]):
-            raise RuntimeError(f"make_synthetic_bag failed for {spec.name}")
+        if not bag.exists():
+            make_bag(bag, SyntheticBagOptions(object_set="textured", object_name=spec.name, views=12, seed=args.seed,
+                                              size=args.size))
         bags["textured objects"].append(bag)
     reports = {name: [args.work_dir / "reports" / bag.name for bag in paths] for name, paths in bags.items()}
     todo = [(bag, report) for name in bags for bag, report in zip(bags[name], reports[name])

@@ -24,11 +24,13 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import torch  # noqa: E402 (after the path setup)
 
+from idpose_core.evaluation.estimator import ViewSetEstimator
+from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.synthetic.scenes import demo_objects, unseen_objects  # noqa: E402
-from idpose_ros.bag_report import pooled_summaries, write_report  # noqa: E402
-from idpose_ros.estimators import EstimatorOptions, ViewSetEstimator, make_estimator  # noqa: E402
-from idpose_ros.evaluate_bag import EvaluationProtocol, evaluate_bag  # noqa: E402
-from idpose_ros.make_synthetic_bag import main as make_synthetic_bag  # noqa: E402
+from idpose_ros.dataset.synthetic_bag import SyntheticBagOptions, make_bag
+from idpose_ros.evaluation.bag_evaluation import evaluate_bag
+from idpose_ros.evaluation.bag_report import pooled_summaries, write_report  # noqa: E402
+from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
 
 OUT = ROOT / "bench" / "results" / "demo_model_accuracy.json"
 
@@ -39,9 +41,7 @@ def evaluate_set(object_set: str, names: list[str], estimator: ViewSetEstimator,
     evaluations = []
     for name in names:
         bag = work / f"{object_set}_{name}"
-        if make_synthetic_bag([str(bag), "--objects", object_set, "--object", name, "--views", str(args.views),
-                               "--seed", str(args.seed)]):
-            raise RuntimeError(f"make_synthetic_bag failed for {object_set}/{name}")
+        make_bag(bag, SyntheticBagOptions(object_set=object_set, object_name=name, views=args.views, seed=args.seed))
         evaluations.append(evaluate_bag(bag, estimator, protocol=EvaluationProtocol(args.samples, args.seed, (2,))))
         print(write_report(work / f"report_{object_set}_{name}", evaluations[-1]), flush=True)
     seconds = [estimate["seconds"] for evaluation in evaluations for estimate in evaluation.estimates]

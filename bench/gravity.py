@@ -27,12 +27,14 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import numpy as np  # noqa: E402 (after the path setup)
 import torch  # noqa: E402
 
+from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
-from idpose_ros.bag_views import ExtraTopics  # noqa: E402
-from idpose_ros.estimators import EstimatorOptions, make_estimator  # noqa: E402
-from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions, evaluate_bag  # noqa: E402
-from idpose_ros.make_synthetic_bag import IMU_TOPIC, make_bag  # noqa: E402
+from idpose_ros.dataset.synthetic_bag import IMU_TOPIC, SyntheticBagOptions, make_bag  # noqa: E402
+from idpose_ros.evaluation.bag_evaluation import evaluate_bag
+from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
+from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions
 
 OUT = ROOT / "bench" / "results" / "gravity.json"
 WITH_GRAVITY = GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
@@ -65,8 +67,8 @@ def accuracy(args: argparse.Namespace, work: Path) -> dict:
     runs: dict[str, list] = {}
     for spec in demo_objects():
         for cameras, roll in (("rolled", args.roll_deg), ("upright", 0.0)):
-            bag = make_bag(work / f"{cameras}_{spec.name}", "mcap", "demo", spec.name, args.views, args.seed,
-                           roll_deg=roll)
+            bag = make_bag(work / f"{cameras}_{spec.name}", SyntheticBagOptions(
+                object_name=spec.name, views=args.views, seed=args.seed, roll_deg=roll))
             for gravity, (options, overrides) in CONDITIONS.items():
                 if overrides and cameras == "upright":
                     continue  # the polar angles' fixed-vs-refined question is asked on the rolled cameras
@@ -80,8 +82,8 @@ def accuracy(args: argparse.Namespace, work: Path) -> dict:
 
 def presets(args: argparse.Namespace, work: Path) -> dict:
     """One rolled bag (the first demo object), one pick, both presets, with and without gravity: the cost."""
-    bag = make_bag(work / "presets", "mcap", "demo", demo_objects()[0].name, args.views, args.seed,
-                   roll_deg=args.roll_deg)
+    bag = make_bag(work / "presets", SyntheticBagOptions(object_name=demo_objects()[0].name, views=args.views,
+                                                         seed=args.seed, roll_deg=args.roll_deg))
     protocol = EvaluationProtocol(1, args.seed, tuple(args.n))
     result = {}
     for preset in ("default", "fast"):

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from bench.tabletop import iou, tabletop_views  # noqa: E402
 from idpose_core.depth_segmentation import depth_cut  # noqa: E402
 from idpose_core.preprocessing import grabcut_mask  # noqa: E402
-from idpose_ros.make_synthetic_bag import make_bag  # noqa: E402
+from idpose_ros.dataset.synthetic_bag import SyntheticBagOptions, make_bag  # noqa: E402
 
 OUT = ROOT / "bench" / "results" / "masks_before_after.png"
 LION = ROOT.parent / "shared" / "reference" / "idpose-official" / "data" / "demo" / "lion"
@@ -47,8 +47,8 @@ def outlined(rgb: np.ndarray, mask: np.ndarray | None, label: str) -> np.ndarray
 
 def tabletop_rows(name: str, count: int, seed: int, work: Path) -> list[np.ndarray]:
     rows = []
-    for view_id, view, truth, _ in tabletop_views(make_bag(work / "bag", "mcap", "demo", name, count, seed,
-                                                          scene="tabletop")):
+    bag = make_bag(work / "bag", SyntheticBagOptions(object_name=name, views=count, seed=seed, scene="tabletop"))
+    for view_id, view, truth, _ in tabletop_views(bag):
         grabcut, depth = grabcut_mask(view.rgb), depth_cut(view).mask
         rows.append(np.hstack([outlined(view.rgb, None, f"{name}, tabletop view {view_id}"),
                                outlined(view.rgb, grabcut, f"colour only (GrabCut): IoU {iou(grabcut, truth):.2f}"),

@@ -27,6 +27,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,22 +37,23 @@ import numpy as np  # noqa: E402 (after the path setup)
 import torch  # noqa: E402
 
 from idpose_core.depth_segmentation import backproject, depth_cut, object_distance  # noqa: E402
+from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.preprocessing import grabcut_mask  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
 from idpose_core.view_input import ViewInput  # noqa: E402
-from idpose_ros.bag_views import ExtraTopics, load_view_messages, read_bag_views  # noqa: E402
-from idpose_ros.estimators import EstimatorOptions, make_estimator  # noqa: E402
-from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions, evaluate_bag  # noqa: E402
-from idpose_ros.make_synthetic_bag import (  # noqa: E402
+from idpose_ros.dataset.synthetic_bag import (
     DEPTH_TOPIC,
     IMAGE_TOPIC,
     INFO_TOPIC,
     TRUE_MASK_TOPIC,
+    SyntheticBagOptions,  # noqa: E402
     make_bag,
 )
-from idpose_ros.view_inputs import view_input  # noqa: E402
-from msg_adapters import image_to_mask  # noqa: E402
+from idpose_ros.evaluation.bag_evaluation import evaluate_bag
+from idpose_ros.evaluation.bag_views import ExtraTopics, load_views, read_bag_views  # noqa: E402
+from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions
 
 OUT = ROOT / "bench" / "results" / "tabletop.json"
 DEPTH = ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC)
@@ -75,11 +77,11 @@ def tabletop_views(bag: Path) -> Iterator[tuple[int, ViewInput, np.ndarray, floa
     """(view id, the view with its depth and intrinsics, its true target mask, its true distance to the target)
     of every view of a tabletop bag."""
     views = read_bag_views(bag, IMAGE_TOPIC, extras=TRUTH)
-    messages = load_view_messages(bag, IMAGE_TOPIC, set(views.pool), views, TRUTH)
+    decoded, _ = load_views(bag, IMAGE_TOPIC, set(views.pool), views, TRUTH)
     for view_id in views.pool:
-        recorded = messages[view_id]
-        yield (view_id, view_input(recorded.image, recorded.depth, None, recorded.camera_info),
-               image_to_mask(recorded.mask), float(np.linalg.norm(views.world_from_camera[view_id][:3, 3])))
+        view = decoded[view_id]
+        yield (view_id, replace(view, mask=None), view.mask,
+               float(np.linalg.norm(views.world_from_camera[view_id][:3, 3])))
 
 
 def masks_and_distances(bag: Path) -> list[dict]:
@@ -118,10 +120,10 @@ def main() -> None:
     names = [spec.name for spec in demo_objects()]
     with tempfile.TemporaryDirectory(prefix="idpose_tabletop_") as folder:
         work = Path(folder)
-        tabletop = {name: make_bag(work / f"tabletop_{name}", "mcap", "demo", name, args.views, args.seed,
-                                   scene="tabletop") for name in names}
-        plain = {name: make_bag(work / f"plain_{name}", "mcap", "demo", name, args.views, args.seed)
-                 for name in names}
+        tabletop = {name: make_bag(work / f"tabletop_{name}", SyntheticBagOptions(
+            object_name=name, views=args.views, seed=args.seed, scene="tabletop")) for name in names}
+        plain = {name: make_bag(work / f"plain_{name}", SyntheticBagOptions(
+            object_name=name, views=args.views, seed=args.seed)) for name in names}
         per_view = {name: masks_and_distances(bag) for name, bag in tabletop.items()}
         estimator = make_estimator(EstimatorOptions(preset=args.preset))
         protocol = EvaluationProtocol(args.samples, args.seed, (2,))

@@ -10,8 +10,11 @@ angle between world up and the direction from the object to the camera.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+
+from idpose_core.transforms import quaternion_to_matrix
 
 NEAR_VERTICAL = 1e-6  # |up_x|, |up_y| below this: the camera looks straight up or down, any roll is upright
 
@@ -110,3 +113,20 @@ def resting_acceleration(stamps: np.ndarray, accelerations: np.ndarray, stamp: i
     chosen = (stamps >= stamp - window) & (stamps <= stamp) | near
     return np.asarray(accelerations, dtype=np.float64)[chosen].mean(axis=0)
 
+
+
+IMU_WINDOW_S = 0.1  # seconds of accelerometer readings before an image averaged into its gravity
+
+
+def rotation_from_extrinsic(values: Sequence[float]) -> np.ndarray:
+    """An IMU-to-optical rotation (3, 3) as a user gives it: a quaternion x y z w, or roll pitch yaw in
+    radians (fixed axes, applied x then y then z). ValueError naming the values for any other form."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 1 or len(values) not in (3, 4) or not np.all(np.isfinite(values)):
+        raise ValueError(f"a rotation is a quaternion x y z w or roll pitch yaw (rad), got {values.tolist()}")
+    if len(values) == 3:
+        roll, pitch, yaw = values
+        return rz(yaw) @ ry(pitch) @ rx(roll)
+    if not np.any(values):
+        raise ValueError(f"the quaternion {values.tolist()} is all zero: it has no rotation")
+    return quaternion_to_matrix(values)

@@ -6,12 +6,11 @@ from pathlib import Path
 
 import torch
 
-from idpose_core.demo_model import DemoPredictor
-from idpose_core.demo_model import predictor as demo_predictor
+from idpose_core.demo_model import DemoPredictor, demo_predictor
 from idpose_core.demo_model.model import WEIGHTS_FILE
-from idpose_core.predictor import NoisePredictor
+from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.zero123 import ModelLoadError, Zero123Predictor
-from idpose_core.zero123.predictor import resolve_device, resolve_dtype
+from idpose_core.zero123.zero123_predictor import resolve_device, resolve_dtype
 
 PRECISIONS = {"auto": None, "float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth", ".safetensors")

@@ -19,7 +19,7 @@ from idpose_core.cameras import anchor_frame_poses
 from idpose_core.depth_segmentation import DepthSegmentationError, object_distance
 from idpose_core.deroll import upright_view
 from idpose_core.gravity import polar_angle, with_roll
-from idpose_core.predictor import NoisePredictor
+from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
 from idpose_core.solver import Progress, SolverConfig, SolverResult, estimate_poses
 from idpose_core.view_input import ViewInput
@@ -29,6 +29,7 @@ __all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "est
 
 MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
 LEVEL_POLAR_DEG = 90.0  # the anchor's polar angle when nothing tells it: a level camera
+ANCHOR_POLAR_RANGE_DEG = (1.0, 179.0)  # the anchor polar angles accepted: straight above or below has no azimuth
 
 
 @dataclass(frozen=True)
@@ -116,7 +117,8 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     solver = settings.solver
     known_polar = None
     if anchor.polar_deg is not None:
-        solver = solver.updated(anchor_polar_deg=min(max(anchor.polar_deg, 1.0), 179.0))
+        low, high = ANCHOR_POLAR_RANGE_DEG
+        solver = solver.updated(anchor_polar_deg=min(max(anchor.polar_deg, low), high))
         known_polar = [math.radians(r.polar_deg - anchor.polar_deg) if r.polar_deg is not None else math.nan
                        for r in reports[1:]]
     polar_deg = solver.anchor_polar_deg or LEVEL_POLAR_DEG

@@ -6,7 +6,10 @@ target views of ``<data_root>/<object>/images/*.png`` + ``poses/*.npy``; its sam
 Every estimate (input x sample x n) is one call on a Ray actor that holds the model (one per worker), on
 a local Ray instance or on a cluster (``--address``). Results stream to ``--out``/results.jsonl as
 estimates finish; a rerun with the same ``--out`` skips the finished ones. A failed estimate is retried
-once, then recorded with its error. Writes report.json, report.md and errors.png into ``--out``.
+once, then recorded with its error. ``--baselines`` runs the classical methods on the same views, as
+``evaluate_bag`` does. Writes report.json, report.md and errors.png into ``--out``.
+
+A thin front end: the inputs, the Ray runner, the results log and the report are ``idpose_ros.dataset``.
 """
 from __future__ import annotations
 
@@ -21,21 +24,23 @@ from typing import Any
 
 from tqdm import tqdm
 
-from idpose_ros.bag_io import BagError
-from idpose_ros.dataset_inputs import DatasetInput, InputError, open_inputs
-from idpose_ros.dataset_report import merge, write_dataset_report
-from idpose_ros.dataset_results import ResultsLog, result_line, task_key
-from idpose_ros.estimators import EstimatorOptions, add_estimator_arguments, estimator_options
-from idpose_ros.evaluate_bag import (
-    EstimateTask,
-    EvaluationProtocol,
-    GroundTruthOptions,
+from idpose_core.evaluation.protocol import EstimateTask, EvaluationProtocol
+from idpose_ros.cli_options import (
+    add_baseline_arguments,
+    add_estimator_arguments,
     add_ground_truth_arguments,
     add_protocol_arguments,
+    estimator_options,
     ground_truth_options,
     protocol_options,
 )
-from idpose_ros.ray_runner import EstimatorPool, Job, RunnerError, WorkerResources, ray_session
+from idpose_ros.dataset.inputs import DatasetInput, InputError, open_inputs
+from idpose_ros.dataset.ray_runner import EstimatorPool, Job, JobResult, RunnerError, WorkerResources, ray_session
+from idpose_ros.dataset.report import merge, write_dataset_report
+from idpose_ros.dataset.results import ResultsLog, result_line, task_key
+from idpose_ros.evaluation.bag_io import BagError
+from idpose_ros.evaluation.estimators import EstimatorOptions
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions
 
 INTERRUPTED = 130  # the shell's exit code for a process stopped by Ctrl-C
 
@@ -47,6 +52,7 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationPr
     parser.add_argument("--out", type=Path, default=Path("dataset_evaluation"),
                         help="results and report folder; rerun into it to resume (default ./dataset_evaluation)")
     add_protocol_arguments(parser, samples_help="random picks of 8 views per bag (official samples are fixed)")
+    add_baseline_arguments(parser)
     group = parser.add_argument_group("Ray")
     group.add_argument("--address", default=None,
                        help="a running Ray cluster (e.g. auto, or HEAD_IP:6379); default: a local instance")
@@ -68,10 +74,11 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationPr
 
 
 def run_settings(options: EstimatorOptions, values: dict[str, Any], ground_truth: GroundTruthOptions,
-                 protocol: EvaluationProtocol) -> dict[str, Any]:
-    """What must not change between a run and its resumption (the model, what shapes an estimate, the seed)."""
+                 protocol: EvaluationProtocol, baselines: Sequence[str]) -> dict[str, Any]:
+    """What must not change between a run and its resumption (the model, what shapes an estimate, the seed,
+    the classical baselines)."""
     return {"model": {"model_path": options.model_path, "precision": options.precision}, "node_parameters": values,
-            "ground_truth": asdict(ground_truth), "seed": protocol.seed}
+            "ground_truth": asdict(ground_truth), "seed": protocol.seed, "baselines": sorted(baselines)}
 
 
 def report_header(options: EstimatorOptions, values: dict[str, Any], ground_truth: GroundTruthOptions,
@@ -86,23 +93,31 @@ def report_header(options: EstimatorOptions, values: dict[str, Any], ground_trut
                              "official": "poses/<vid>.npy (OpenGL camera-to-world, object frame)"}}
 
 
-def jobs(todo: Sequence[tuple[DatasetInput, EstimateTask]]) -> Iterator[Job]:
-    """The estimates to run, each with its views' images, read one input at a time as workers become free."""
+def jobs(todo: Sequence[tuple[DatasetInput, EstimateTask]], undecodable: list[JobResult]) -> Iterator[Job]:
+    """The estimates to run, each with its views decoded, read one input at a time as workers become free; an
+    estimate holding a view that does not decode goes to ``undecodable`` as failed instead."""
     for item, group in itertools.groupby(todo, key=lambda pair: pair[0]):
         tasks = [task for _, task in group]
-        messages = item.messages({v for task in tasks for v in task.pick[:task.n]})
+        views, problems = item.views({v for task in tasks for v in task.views})
         for task in tasks:
-            yield Job(task_key(item.name, task), task, [messages[v] for v in task.pick[:task.n]])
+            broken = "; ".join(f"view {v}: {problems[v]}" for v in task.views if v in problems)
+            if broken:
+                undecodable.append(JobResult(task_key(item.name, task), task, 0, error=broken))
+                continue
+            yield Job(task_key(item.name, task), task, [views[v] for v in task.views])
 
 
 def run(todo: Sequence[tuple[DatasetInput, EstimateTask]], log: ResultsLog, options: EstimatorOptions,
-        resources: WorkerResources, address: str | None, solver_seed: int, done_before: int) -> None:
+        resources: WorkerResources, address: str | None, solver_seed: int, done_before: int,
+        baselines: Sequence[str] = ()) -> None:
     """Run the estimates on Ray, appending each result to the log as it arrives; a progress bar with ETA."""
     inputs = {task_key(item.name, task): item for item, task in todo}
     failed = 0
+    undecodable: list[JobResult] = []
+    pool = EstimatorPool(options, resources, baselines=tuple(baselines))
     with tqdm(total=done_before + len(todo), initial=done_before, desc="estimating", unit="estimate",
-              file=sys.stderr, smoothing=0.1) as bar, ray_session(address), EstimatorPool(options, resources) as pool:
-        for result in pool.run(jobs(todo)):
+              file=sys.stderr, smoothing=0.1) as bar, ray_session(address), pool:
+        for result in itertools.chain(pool.run(jobs(todo, undecodable)), undecodable):
             log.append(result_line(inputs[result.key], result, solver_seed))
             failed += result.outcome is None
             if failed:
@@ -118,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         values = options.node_values()
         inputs = open_inputs(args.inputs, ground_truth)
         planned = [(item, item.plan(protocol)) for item in inputs]
-        log = ResultsLog(args.out, run_settings(options, values, ground_truth, protocol))
+        log = ResultsLog(args.out, run_settings(options, values, ground_truth, protocol, args.baselines))
     except (BagError, InputError, ValueError) as err:
         print(f"evaluate_dataset: error: {err}", file=sys.stderr)
         return 2
@@ -130,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         resources = WorkerResources(args.workers, args.num_cpus_per_worker, args.num_gpus_per_worker)
         try:
             if todo:
-                run(todo, log, options, resources, args.address, values["seed"], total - len(todo))
+                run(todo, log, options, resources, args.address, values["seed"], total - len(todo), args.baselines)
         except KeyboardInterrupt:
             finished = sum(log.done(task_key(item.name, task)) for item, tasks in planned for task in tasks)
             print(f"\nevaluate_dataset: interrupted; {finished} of {total} estimates have succeeded ({log.path}): "

@@ -5,7 +5,7 @@ Imports numpy, OpenCV and the ROS message packages only (no torch, no idpose_cor
 node's message handling can be tested and reused without a model.
 """
 
-from msg_adapters.camera_info import camera_info_to_matrix
+from msg_adapters.camera_info import camera_info_to_matrix, matrix_to_camera_info
 from msg_adapters.compressed import compressed_to_rgb
 from msg_adapters.depth import depth_to_image, image_to_depth, image_to_mask
 from msg_adapters.encodings import Encoding, lookup_encoding
@@ -16,6 +16,7 @@ from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
 from msg_adapters.markers import camera_markers
 from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_array
 from msg_adapters.sensors import imu_acceleration, orientation_rotation
+from msg_adapters.validation import check_image
 
 __all__ = [
     "AdapterError",
@@ -24,6 +25,7 @@ __all__ = [
     "array_to_image",
     "camera_info_to_matrix",
     "camera_markers",
+    "check_image",
     "compressed_to_rgb",
     "depth_to_image",
     "encoded_size",
@@ -33,6 +35,7 @@ __all__ = [
     "image_to_rgb",
     "imu_acceleration",
     "lookup_encoding",
+    "matrix_to_camera_info",
     "matrix_to_pose",
     "orientation_rotation",
     "pose_to_matrix",

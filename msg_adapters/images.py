@@ -5,18 +5,15 @@ import numpy as np
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-from msg_adapters.encodings import check_size, lookup_encoding
+from msg_adapters.encodings import Encoding, check_size, lookup_encoding
 from msg_adapters.errors import AdapterError
 from msg_adapters.image_size import check_pixels
 from msg_adapters.rgb import pixels_to_rgb
 
 
-def image_to_array(msg: Image, max_pixels: int | None = None) -> np.ndarray:
-    """The pixels of `msg` as a fresh (H, W) or (H, W, C) array of the encoding's dtype, native byte order.
-
-    Always a copy: rclpy may reuse the message buffer after the callback returns. More than
-    ``max_pixels`` pixels raise ``ImageTooLarge`` before ``data`` is touched.
-    """
+def checked_layout(msg: Image, max_pixels: int | None = None) -> tuple[Encoding, int, int, int]:
+    """(encoding, height, width, step) of ``msg`` once its encoding, size, row padding and data length agree;
+    AdapterError names what does not (``ImageTooLarge`` above ``max_pixels``). Reads no pixel."""
     encoding = lookup_encoding(msg.encoding)
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
     check_size(encoding, height, width, "Image")
@@ -32,11 +29,22 @@ def image_to_array(msg: Image, max_pixels: int | None = None) -> np.ndarray:
             f"Image.step={step} is not a multiple of the {encoding.dtype.itemsize}-byte element "
             f"of encoding {encoding.name!r}"
         )
-    data = np.frombuffer(msg.data, dtype=np.uint8)
-    if data.size != step * height:
+    if len(msg.data) != step * height:
         raise AdapterError(
-            f"Image.data has {data.size} bytes; expected step*height = {step}*{height} = {step * height}"
+            f"Image.data has {len(msg.data)} bytes; expected step*height = {step}*{height} = {step * height}"
         )
+    return encoding, height, width, step
+
+
+def image_to_array(msg: Image, max_pixels: int | None = None) -> np.ndarray:
+    """The pixels of `msg` as a fresh (H, W) or (H, W, C) array of the encoding's dtype, native byte order.
+
+    Always a copy: rclpy may reuse the message buffer after the callback returns. More than
+    ``max_pixels`` pixels raise ``ImageTooLarge`` before ``data`` is touched.
+    """
+    encoding, height, width, step = checked_layout(msg, max_pixels)
+    row_bytes = width * encoding.pixel_bytes
+    data = np.frombuffer(msg.data, dtype=np.uint8)
     wire_dtype = encoding.dtype.newbyteorder(">" if msg.is_bigendian else "<")
     rows = data.reshape(height, step)[:, :row_bytes].view(wire_dtype)
     shape = (height, width) if encoding.channels == 1 else (height, width, encoding.channels)

@@ -17,19 +17,19 @@ from std_msgs.msg import Header
 from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
 from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_core.transforms import rigid_transform
-from idpose_ros.bag_io import BagError, BagWriter
-from idpose_ros.bag_views import load_view_messages, read_bag_views
-from idpose_ros.make_synthetic_bag import (
+from idpose_ros.dataset.synthetic_bag import (
     IMAGE_TOPIC,
     PERIOD_NS,
     POSE_TOPIC,
     START_NS,
+    SyntheticBagOptions,
     make_bag,
     write_pose,
     write_rgba_image,
     write_tf,
 )
-from idpose_ros.view_inputs import decode_image
+from idpose_ros.evaluation.bag_io import BagError, BagWriter
+from idpose_ros.evaluation.bag_views import load_views, read_bag_views
 
 SECOND = 1_000_000_000
 
@@ -42,7 +42,7 @@ def quarter_turn_z() -> np.ndarray:
 def tiny_bag(request, tmp_path_factory):
     """(path, storage, seed): 3 views of the duck, 32 px, written in each storage format."""
     path = tmp_path_factory.mktemp(request.param) / "bag"
-    make_bag(path, request.param, "demo", None, views=3, seed=7, size=32)
+    make_bag(path, SyntheticBagOptions(request.param, "demo", None, views=3, seed=7, size=32))
     return path, request.param, 7
 
 
@@ -76,9 +76,9 @@ def test_pose_topic_ground_truth_equals_tf_ground_truth(tiny_bag):
 
 def test_images_decode_with_the_mask_in_alpha(tiny_bag):
     path, _, _ = tiny_bag
-    messages = load_view_messages(path, IMAGE_TOPIC, {0, 2})
-    assert sorted(messages) == [0, 2]
-    rgb, alpha = decode_image(messages[2].image)
+    views, problems = load_views(path, IMAGE_TOPIC, {0, 2}, read_bag_views(path, IMAGE_TOPIC))
+    assert sorted(views) == [0, 2] and problems == {}
+    rgb, alpha = views[2].rgb, views[2].alpha
     assert rgb.shape == (32, 32, 3) and alpha.shape == (32, 32)
     assert set(np.unique(alpha)) == {0, 255}
     assert np.all(rgb[alpha == 0] == 255)  # white background
@@ -166,7 +166,8 @@ def test_compressed_images_and_undecodable_ones(tmp_path):
             bag.write("/img/compressed", "sensor_msgs/msg/CompressedImage", stamp, serialize_message(message))
     bag = read_bag_views(path, "/img/compressed")
     assert bag.pool == [0] and "bad image" in bag.skipped[1]
-    rgb, alpha = decode_image(load_view_messages(path, "/img/compressed", {0})[0].image)
+    view = load_views(path, "/img/compressed", {0}, bag)[0][0]
+    rgb, alpha = view.rgb, view.alpha
     assert rgb.shape == (6, 8, 3) and np.all(rgb[..., 2] == 255) and alpha.sum() == 6 * 255
 
 
@@ -213,5 +214,6 @@ def test_the_shipped_demo_bags(name):
     expected = expected_optical_poses(0, 12)
     for view_id in bag.pool:
         np.testing.assert_allclose(bag.world_from_camera[view_id], expected[view_id], atol=1e-9)
-    rgb, alpha = decode_image(load_view_messages(path, IMAGE_TOPIC, {0})[0].image)
+    view = load_views(path, IMAGE_TOPIC, {0}, bag)[0][0]
+    rgb, alpha = view.rgb, view.alpha
     assert rgb.shape == (256, 256, 3) and alpha.max() == 255

@@ -10,7 +10,7 @@ import torch
 
 from idpose_core.demo_model import DemoDiffusionModel, DemoModelConfig, DemoPredictor
 from idpose_core.demo_model.model import CONFIG_FILE, WEIGHTS_FILE
-from idpose_core.predictor import NoisePredictor
+from idpose_core.noise_predictor import NoisePredictor
 
 TINY = DemoModelConfig(resolution=16, block_out_channels=(8, 16), norm_num_groups=4, embedding_dim=16,
                        encoder_layers=1, encoder_heads=2, resnet_time_scale_shift="scale_shift",

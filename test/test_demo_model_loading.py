@@ -7,8 +7,7 @@ import logging
 import pytest
 import torch
 
-from idpose_core.demo_model import DemoDiffusionModel, DemoModelConfig, DemoPredictor
-from idpose_core.demo_model import predictor as demo_predictor
+from idpose_core.demo_model import DemoDiffusionModel, DemoModelConfig, DemoPredictor, demo_predictor
 from idpose_core.model_loading import load_predictor
 from idpose_core.zero123 import ModelLoadError
 

@@ -26,7 +26,7 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
-from idpose_ros.diagnostics import STATUS_NAME
+from idpose_ros.node.diagnostics import STATUS_NAME
 from msg_adapters import array_to_image
 
 ROOT = Path(__file__).resolve().parents[1]

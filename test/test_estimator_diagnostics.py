@@ -2,7 +2,7 @@
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from idpose_ros.diagnostics import STATUS_NAME, EstimatorStatus, diagnostic_array
+from idpose_ros.node.diagnostics import STATUS_NAME, EstimatorStatus, diagnostic_array
 
 
 def values(status: EstimatorStatus) -> tuple[DiagnosticStatus, dict[str, str]]:

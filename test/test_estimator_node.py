@@ -34,8 +34,8 @@ from visualization_msgs.msg import MarkerArray
 
 from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import ViewInput, estimate_view_poses
-from idpose_ros.estimator_node import RESULT_QOS, EstimatorNode
-from idpose_ros.parameters import current_values, pipeline_settings
+from idpose_ros.node.estimator_node import RESULT_QOS, EstimatorNode
+from idpose_ros.node.parameters import current_values, pipeline_settings
 from msg_adapters import array_to_image, compressed_to_rgb, image_to_rgb, pose_to_matrix
 
 TIMEOUT = 60.0

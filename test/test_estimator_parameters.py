@@ -13,7 +13,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from idpose_core.solver import SolverConfig
-from idpose_ros.parameters import SOLVER_PARAMETERS, declare_parameters, node_settings, parameter_table, solver_config
+from idpose_ros.node.parameters import (
+    SOLVER_PARAMETERS,
+    declare_parameters,
+    node_settings,
+    parameter_table,
+    solver_config,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "diagnostics_period", "gravity",

@@ -6,8 +6,8 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 from idpose_core.pipeline import ViewInput
-from idpose_ros.raw_image import RawImage
-from idpose_ros.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
+from idpose_ros.node.raw_image import RawImage
+from idpose_ros.node.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
 
 
 def message(index: int) -> RawImage:

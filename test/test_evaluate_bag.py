@@ -15,14 +15,17 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
+from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.synthetic.render_oracle import IdentifyingOracle
 from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
-from idpose_ros import estimator_node, estimators, evaluate_bag
-from idpose_ros.bag_io import TYPESTORE, BagWriter
-from idpose_ros.bag_report import write_report
-from idpose_ros.estimators import EstimatorOptions, OfflineEstimator
-from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions
-from idpose_ros.make_synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, make_bag
+from idpose_ros import evaluate_bag
+from idpose_ros.dataset.synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, SyntheticBagOptions, make_bag
+from idpose_ros.evaluation import bag_evaluation, estimators
+from idpose_ros.evaluation.bag_io import TYPESTORE, BagWriter
+from idpose_ros.evaluation.bag_report import write_report
+from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
+from idpose_ros.node import estimator_node
 
 SEED, VIEWS, SIZE = 5, 10, 64
 ORACLE_SOLVER = ("adjust_lr=1.0", "refine_lr=0.1", "refine_steps_per_view=30")
@@ -37,7 +40,7 @@ def node_values(preset: str, variant: str | None, overrides, image_size: int = 2
 @pytest.fixture(scope="module")
 def demo_bag(tmp_path_factory):
     path = tmp_path_factory.mktemp("eval") / "bag"
-    make_bag(path, "sqlite3", "demo", None, views=VIEWS, seed=SEED, size=SIZE)
+    make_bag(path, SyntheticBagOptions("sqlite3", "demo", None, views=VIEWS, seed=SEED, size=SIZE))
     return path
 
 
@@ -50,7 +53,7 @@ def oracle():
 @pytest.fixture(scope="module")
 def oracle_run(demo_bag, oracle):
     estimator = OfflineEstimator(oracle, ORACLE_OPTIONS.node_values(), {"predictor": "oracle"}, "fast")
-    return evaluate_bag.evaluate_bag(demo_bag, estimator, GroundTruthOptions(IMAGE_TOPIC),
+    return bag_evaluation.evaluate_bag(demo_bag, estimator, GroundTruthOptions(IMAGE_TOPIC),
                                      EvaluationProtocol(samples=2, seed=0), show_progress=False)
 
 
@@ -85,7 +88,7 @@ def test_tf_and_pose_topic_ground_truth_give_the_same_numbers(demo_bag, oracle):
     estimator = OfflineEstimator(oracle, ORACLE_OPTIONS.node_values())
     records = []
     for gt_topic in (None, POSE_TOPIC):
-        run = evaluate_bag.evaluate_bag(demo_bag, estimator, GroundTruthOptions(IMAGE_TOPIC, gt_topic=gt_topic),
+        run = bag_evaluation.evaluate_bag(demo_bag, estimator, GroundTruthOptions(IMAGE_TOPIC, gt_topic=gt_topic),
                                         EvaluationProtocol(samples=1, seed=3, view_counts=(2,)), show_progress=False)
         records.append(run.records)
     from_tf, from_topic = records
@@ -187,12 +190,12 @@ def test_an_implausible_view_fails_its_estimates_only(tmp_path, demo_bag, oracle
     """Every estimate holding the transparent view is recorded as failed, with the reason; the others are scored,
     the report lists the failures, and the command says so (exit 0 while something was scored)."""
     protocol = EvaluationProtocol(samples=2, seed=0, view_counts=(2, 4))
-    views = evaluate_bag.read_views(demo_bag, GroundTruthOptions(IMAGE_TOPIC))
-    tasks = evaluate_bag.plan_tasks(views, GroundTruthOptions(IMAGE_TOPIC), protocol)
+    views = read_views(demo_bag, GroundTruthOptions(IMAGE_TOPIC))
+    tasks = bag_evaluation.plan_bag(views, GroundTruthOptions(IMAGE_TOPIC), protocol)
     blank = tasks[0].pick[1]  # the first pick's second view: both of its estimates hold it
     copy_with_transparent_view(demo_bag, tmp_path / "bag", blank)  # every image is a view: ids are indices
     estimator = OfflineEstimator(oracle, ORACLE_OPTIONS.node_values())
-    run = evaluate_bag.evaluate_bag(tmp_path / "bag", estimator, GroundTruthOptions(IMAGE_TOPIC), protocol,
+    run = bag_evaluation.evaluate_bag(tmp_path / "bag", estimator, GroundTruthOptions(IMAGE_TOPIC), protocol,
                                     show_progress=False)
     holding = [(t.sample, t.n) for t in tasks if blank in t.pick[:t.n]]
     assert holding and len(holding) < len(tasks)

@@ -10,13 +10,15 @@ import numpy as np
 import pytest
 
 from idpose_core.baselines import CONVERGED, FAILED, FEWER
-from idpose_core.evaluation import ViewSetEstimate
-from idpose_ros import evaluate_bag
-from idpose_ros.bag_report import write_report
-from idpose_ros.bag_views import ExtraTopics, default_camera_info_topic
-from idpose_ros.estimators import EstimatorOptions
-from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions
-from idpose_ros.make_synthetic_bag import IMAGE_TOPIC, make_bag
+from idpose_core.evaluation.estimator import ViewSetEstimate
+from idpose_core.evaluation.protocol import EvaluationProtocol
+from idpose_ros import cli_options, evaluate_bag
+from idpose_ros.dataset.synthetic_bag import IMAGE_TOPIC, SyntheticBagOptions, make_bag
+from idpose_ros.evaluation import bag_evaluation
+from idpose_ros.evaluation.bag_report import write_report
+from idpose_ros.evaluation.bag_views import ExtraTopics, default_camera_info_topic
+from idpose_ros.evaluation.estimators import EstimatorOptions
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 
 SIZE, VIEWS = 256, 6
 
@@ -38,13 +40,13 @@ class AnchorStub:
 @pytest.fixture(scope="module")
 def textured_bag(tmp_path_factory):
     path = tmp_path_factory.mktemp("baselines") / "bag"
-    make_bag(path, "mcap", "textured", "numbered_cube", views=VIEWS, seed=2, size=SIZE)
+    make_bag(path, SyntheticBagOptions("mcap", "textured", "numbered_cube", views=VIEWS, seed=2, size=SIZE))
     return path
 
 
 @pytest.fixture(scope="module")
 def run(textured_bag):
-    return evaluate_bag.evaluate_bag(textured_bag, AnchorStub(), GroundTruthOptions(IMAGE_TOPIC),
+    return bag_evaluation.evaluate_bag(textured_bag, AnchorStub(), GroundTruthOptions(IMAGE_TOPIC),
                                      EvaluationProtocol(samples=1, seed=0, view_counts=(2, 4)), show_progress=False,
                                      baselines=("colmap", "features"))
 
@@ -81,7 +83,7 @@ def test_the_report_has_a_row_and_convergence_counts_per_baseline(run, tmp_path)
 
 
 def test_without_baselines_the_report_is_unchanged(textured_bag, tmp_path):
-    plain = evaluate_bag.evaluate_bag(textured_bag, AnchorStub(), GroundTruthOptions(IMAGE_TOPIC),
+    plain = bag_evaluation.evaluate_bag(textured_bag, AnchorStub(), GroundTruthOptions(IMAGE_TOPIC),
                                       EvaluationProtocol(samples=1, seed=0, view_counts=(2,)), show_progress=False)
     assert plain.baseline_records == {}
     write_report(tmp_path, plain)
@@ -92,15 +94,15 @@ def test_without_baselines_the_report_is_unchanged(textured_bag, tmp_path):
 def test_camera_info_topic_default_missing_and_unknown_baselines(textured_bag):
     assert default_camera_info_topic("/camera/image_raw") == "/camera/camera_info"
     assert default_camera_info_topic("/cam/color/image_raw/compressed") == "/cam/color/camera_info"
-    views = evaluate_bag.read_views(textured_bag, GroundTruthOptions(IMAGE_TOPIC,
+    views = read_views(textured_bag, GroundTruthOptions(IMAGE_TOPIC,
                                                                      extras=ExtraTopics(camera_info_topic="/none")))
     assert views.pool and not any("camera_info" in sources.messages for sources in views.extras.values())
     with pytest.raises(ValueError, match="unknown baseline 'relpose'"):
-        evaluate_bag.evaluate_bag(textured_bag, AnchorStub(), GroundTruthOptions(IMAGE_TOPIC), views=views,
+        bag_evaluation.evaluate_bag(textured_bag, AnchorStub(), GroundTruthOptions(IMAGE_TOPIC), views=views,
                                   baselines=("relpose",), show_progress=False)
     args, _ = evaluate_bag.parse_args([str(textured_bag), "--baselines", "colmap", "features",
                                     "--camera-info-topic", "/cam/camera_info"])
     assert args.baselines == ["colmap", "features"]
-    assert evaluate_bag.ground_truth_options(args).inputs.camera_info_topic == "/cam/camera_info"
+    assert cli_options.ground_truth_options(args).inputs.camera_info_topic == "/cam/camera_info"
     with pytest.raises(SystemExit):
         evaluate_bag.parse_args([str(textured_bag), "--baselines", "relpose"])

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from idpose_core.evaluation.picks import TooFewViews, usable_view_counts
 from idpose_core.transforms import rigid_transform
 from idpose_ros import evaluate_bag, make_synthetic_bag
-from idpose_ros.bag_io import BagError, BagWriter
-from idpose_ros.evaluate_bag import usable_view_counts
-from idpose_ros.make_synthetic_bag import write_rgba_image, write_tf
+from idpose_ros.dataset.synthetic_bag import write_rgba_image, write_tf
+from idpose_ros.evaluation.bag_io import BagError, BagWriter
 
 SECOND = 1_000_000_000
 DEMO_BAG = Path(__file__).resolve().parents[1] / "data" / "demo_bags" / "duck"
@@ -90,7 +90,7 @@ def test_no_traceback_from_the_command_line(tmp_path):
 def test_small_pools_evaluate_the_view_counts_they_can_hold():
     assert usable_view_counts([8, 2, 4, 6], pool_size=5) == [2, 4]
     assert usable_view_counts([2, 4, 6, 8], pool_size=30) == [2, 4, 6, 8]
-    with pytest.raises(BagError, match="only 3 usable views: cannot evaluate sets of 4, 6 views"):
+    with pytest.raises(TooFewViews, match="only 3 usable views: cannot evaluate sets of 4, 6 views"):
         usable_view_counts([4, 6], pool_size=3)
 
 

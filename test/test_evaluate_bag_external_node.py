@@ -30,7 +30,7 @@ TINY_SOLVER = ["azimuth_candidates=2", "probe_batch=1", "adjust_steps=0", "keep_
 def running_node(tiny_model_dir, wait_for):
     """The estimator in a subprocess, in a namespace of its own; yields its fully qualified name."""
     process = subprocess.Popen(
-        [sys.executable, "-m", "idpose_ros.estimator_node", "--ros-args", "-r", f"__ns:={NAMESPACE}",
+        [sys.executable, "-m", "idpose_ros.node.estimator_node", "--ros-args", "-r", f"__ns:={NAMESPACE}",
          "-p", f"model_path:={tiny_model_dir}", "-p", "device:=cpu", "-p", "diagnostics_period:=0.2"],
         stderr=subprocess.PIPE, text=True)
     lines: list[str] = []
@@ -76,7 +76,7 @@ def test_replay_to_a_running_node_agrees_with_offline(tmp_path, running_node, ti
 
 
 def test_a_wrong_node_name_is_a_clear_error(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("idpose_ros.replay.CONNECT_TIMEOUT", 1.0)
+    monkeypatch.setattr("idpose_ros.evaluation.replay.CONNECT_TIMEOUT", 1.0)
     code = evaluate_bag.main([str(DEMO_BAG), "--mode", "replay", "--node", "/no_such/idpose_estimator",
                               "--out", str(tmp_path)])
     assert code == 2

@@ -5,15 +5,11 @@ import numpy as np
 import pytest
 
 from idpose_core.cameras import anchor_frame_poses, opengl_to_optical, spherical_to_c2w
-from idpose_core.evaluation import (
-    draw_picks,
-    match_stamps,
-    object_frame_c2w,
-    score_poses,
-    world_cameras,
-    world_to_object,
-)
+from idpose_core.evaluation.object_frame import object_frame_c2w, world_cameras, world_to_object
+from idpose_core.evaluation.picks import draw_picks
+from idpose_core.evaluation.scoring import score_poses
 from idpose_core.gravity import with_roll
+from idpose_core.stamps import match_stamps
 from idpose_core.synthetic.scenes import rolled_optical_frames
 from idpose_core.transforms import invert_transform
 

@@ -12,16 +12,18 @@ import cv2
 import numpy as np
 import pytest
 
-from idpose_core.evaluation import object_frame_c2w, score_poses
+from idpose_core.evaluation.object_frame import object_frame_c2w
+from idpose_core.evaluation.protocol import EvaluationProtocol
+from idpose_core.evaluation.run import run_estimate
+from idpose_core.evaluation.scoring import random_baseline, score_poses
 from idpose_ros import evaluate_dataset
-from idpose_ros.bag_views import load_view_messages
-from idpose_ros.dataset_inputs import InputError, open_inputs, png_to_image
-from idpose_ros.dataset_report import merge, write_dataset_report
-from idpose_ros.dataset_results import ResultsLog, SettingsMismatch, result_line, task_key
-from idpose_ros.estimators import EstimatorOptions, make_estimator
-from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions, random_baseline, read_views, run_estimate
-from idpose_ros.ray_runner import JobResult
-from idpose_ros.view_inputs import decode_image
+from idpose_ros.dataset.inputs import InputError, open_inputs, read_png_view
+from idpose_ros.dataset.ray_runner import JobResult
+from idpose_ros.dataset.report import merge, write_dataset_report
+from idpose_ros.dataset.results import ResultsLog, SettingsMismatch, result_line, task_key
+from idpose_ros.evaluation.bag_views import load_views
+from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 
 ROOT = Path(__file__).resolve().parents[1]
 DUCK = ROOT / "data" / "demo_bags" / "duck"
@@ -42,9 +44,8 @@ def write_official_layout(bag: Path, root: Path, samples: list[tuple[int, ...]],
     folder = root / "synthetic" / "duck"
     (folder / "images").mkdir(parents=True)
     (folder / "poses").mkdir()
-    for view, message in load_view_messages(bag, gt.image_topic, set(ids)).items():
-        rgb, alpha = decode_image(message.image)
-        cv2.imwrite(str(folder / "images" / f"{view:03d}.png"), cv2.cvtColor(np.dstack([rgb, alpha]),
+    for view, decoded in load_views(bag, gt.image_topic, set(ids), views)[0].items():
+        cv2.imwrite(str(folder / "images" / f"{view:03d}.png"), cv2.cvtColor(np.dstack([decoded.rgb, decoded.alpha]),
                                                                               cv2.COLOR_RGBA2BGRA))
         np.save(folder / "poses" / f"{view:03d}.npy", object_frame_c2w(views.world_from_camera[view], gt.object_center,
                                                                       gt.up))
@@ -95,25 +96,28 @@ def test_official_samples_fix_the_views_and_their_ground_truth_is_the_official_o
             expected = np.array(official["obs"][f"{target:03d}"]["gt_rel_sph"])
             expected[1] %= 2 * np.pi
             np.testing.assert_allclose(pair["true_rel_sph"], expected, atol=1e-6)
-        image = item.messages({task.pick[0]})[task.pick[0]].image
+        view = item.views({task.pick[0]})[0][task.pick[0]]
         png = cv2.imread(str(REFERENCE / "data" / "omni3d" / Path(item.name).name / "images"
                              / f"{task.pick[0]:03d}.png"), cv2.IMREAD_UNCHANGED)
-        rgb, alpha = decode_image(image)
-        assert image.encoding == "rgba8" and (image.height, image.width) == png.shape[:2]
-        np.testing.assert_array_equal(alpha, png[..., 3])
-        np.testing.assert_array_equal(rgb, png[..., 2::-1])
+        assert view.rgb.shape[:2] == png.shape[:2]
+        np.testing.assert_array_equal(view.alpha, png[..., 3])
+        np.testing.assert_array_equal(view.rgb, png[..., 2::-1])
 
 
-def test_png_to_image_takes_grey_rgb_and_rgba(tmp_path):
+def test_png_views_take_grey_rgb_and_rgba(tmp_path):
     pixels = np.random.default_rng(0).integers(0, 256, (5, 7, 4), dtype=np.uint8)
-    for channels, encoding in ((1, "mono8"), (3, "rgb8"), (4, "rgba8")):
+    for channels in (1, 3, 4):
         path = tmp_path / f"{channels}.png"
         cv2.imwrite(str(path), pixels[..., 0] if channels == 1 else pixels[..., :channels])
-        message = png_to_image(path, "frame")
-        assert (message.encoding, message.header.frame_id, message.width, message.height) == (encoding, "frame", 7, 5)
+        view = read_png_view(path)
+        assert view.rgb.shape == (5, 7, 3) and (view.alpha is not None) == (channels == 4)
+        expected = np.repeat(pixels[..., :1], 3, axis=2) if channels == 1 else pixels[..., 2::-1]
+        np.testing.assert_array_equal(view.rgb, expected)
+        if channels == 4:
+            np.testing.assert_array_equal(view.alpha, pixels[..., 3])
     (tmp_path / "broken.png").write_bytes(b"not a png")
     with pytest.raises(InputError, match="not an 8-bit image"):
-        png_to_image(tmp_path / "broken.png", "frame")
+        read_png_view(tmp_path / "broken.png")
 
 
 def test_the_same_views_as_a_bag_and_as_official_files_give_the_same_estimate(duck_both_ways, estimator):
@@ -124,7 +128,7 @@ def test_the_same_views_as_a_bag_and_as_official_files_give_the_same_estimate(du
         (t.sample, t.index, t.pick[:t.n]) for t in bag_tasks]
     for bag_task, official_task in zip(bag_tasks[:2], official_tasks[:2]):
         np.testing.assert_allclose(official_task.true_c2w, bag_task.true_c2w[:4], atol=1e-12)
-        outcomes = [run_estimate(estimator, task, [item.messages(set(task.pick))[v] for v in task.pick[:task.n]])
+        outcomes = [run_estimate(estimator, task, [item.views(set(task.pick))[0][v] for v in task.views])
                     for item, task in ((bag, bag_task), (official, official_task))]
         pairs = [[{k: v for k, v in pair.items() if k != "seconds"} for pair in outcome.records]
                  for outcome in outcomes]
@@ -146,7 +150,7 @@ def test_a_samples_file_that_does_not_fit_says_why(tmp_path):
 
 def finished(item, task, estimator, attempts: int = 1) -> JobResult:
     """The JobResult a worker would send for this task."""
-    outcome = run_estimate(estimator, task, [item.messages(set(task.pick))[v] for v in task.pick[:task.n]])
+    outcome = run_estimate(estimator, task, [item.views(set(task.pick))[0][v] for v in task.views])
     return JobResult(task_key(item.name, task), task, attempts, outcome, "host:1")
 
 

@@ -19,9 +19,11 @@ import pytest
 import ray
 from test_evaluate_dataset import DUCK, OPTIONS, REDUCED, ROOT, write_official_layout
 
+from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_ros import evaluate_dataset
-from idpose_ros.estimators import make_estimator
-from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions, evaluate_bag
+from idpose_ros.evaluation.bag_evaluation import evaluate_bag
+from idpose_ros.evaluation.estimators import make_estimator
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions
 
 PROTOCOL = EvaluationProtocol(samples=2, seed=0, view_counts=(2, 4))
 ESTIMATES, FAILING = 7, 1  # 4 of the bag, 2 of its first pick as official files, 1 blank sample

@@ -11,7 +11,7 @@ from std_msgs.msg import Header
 from idpose_core.gravity import up_from_orientation
 from idpose_core.synthetic.robot_views import LINK_FROM_OPTICAL
 from idpose_core.synthetic.scenes import rolled_optical_frames
-from idpose_ros.input_sync import InputSync
+from idpose_ros.node.input_sync import InputSync
 from msg_adapters import AdapterError, matrix_to_pose
 
 SECOND = 1_000_000_000

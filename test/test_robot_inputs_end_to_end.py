@@ -12,15 +12,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from idpose_core.evaluation import draw_picks
+from idpose_core.evaluation.picks import draw_picks
+from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.synthetic.render_oracle import IdentifyingOracle, RenderOracle
 from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_core.synthetic.tabletop import tabletop_cameras
-from idpose_ros import estimator_node, estimators
-from idpose_ros.bag_views import ExtraTopics
-from idpose_ros.estimators import EstimatorOptions, OfflineEstimator
-from idpose_ros.evaluate_bag import EvaluationProtocol, GroundTruthOptions, evaluate_bag
-from idpose_ros.make_synthetic_bag import DEPTH_TOPIC, IMU_TOPIC, ORIENTATION_TOPIC, make_bag
+from idpose_ros.dataset.synthetic_bag import DEPTH_TOPIC, IMU_TOPIC, ORIENTATION_TOPIC, SyntheticBagOptions, make_bag
+from idpose_ros.evaluation import estimators
+from idpose_ros.evaluation.bag_evaluation import evaluate_bag
+from idpose_ros.evaluation.bag_views import ExtraTopics
+from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions
+from idpose_ros.node import estimator_node
 
 SEED, VIEWS, SIZE, ROLL_DEG = 11, 6, 96, 40.0
 ORACLE = EstimatorOptions(preset="fast", image_size=96,
@@ -36,7 +39,7 @@ def oracle_for(seed: int, size: int) -> IdentifyingOracle:
 @pytest.fixture(scope="module")
 def rolled_bag(tmp_path_factory):
     path = tmp_path_factory.mktemp("rolled") / "bag"
-    make_bag(path, "mcap", "demo", None, views=VIEWS, seed=SEED, size=SIZE, roll_deg=ROLL_DEG)
+    make_bag(path, SyntheticBagOptions("mcap", "demo", None, views=VIEWS, seed=SEED, size=SIZE, roll_deg=ROLL_DEG))
     return path
 
 
@@ -65,7 +68,7 @@ def test_without_gravity_a_rolled_view_is_not_even_recognised(rolled_bag):
 def test_a_tabletop_bag_is_cut_out_and_scaled_by_depth(tmp_path):
     """Every view's mask comes from depth, the anchor's distance too; the predictor (the render oracle of the
     pick's cameras) only has to run: accuracy on tabletop scenes is measured by bench/tabletop.py."""
-    bag = make_bag(tmp_path / "tabletop", "mcap", "demo", None, views=4, seed=SEED, scene="tabletop")
+    bag = make_bag(tmp_path / "tabletop", SyntheticBagOptions(views=4, seed=SEED, scene="tabletop"))
     pick = draw_picks(list(range(4)), 1, SEED)[0][:2]  # n = 2: its first two views
     cameras = tabletop_cameras(np.random.default_rng(SEED), 4)[pick]
     oracle = RenderOracle(demo_objects()[0], np.column_stack([cameras[:, :2], np.full(len(pick), 2.0)]),

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from idpose_core.predictor import NoisePredictor
+from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.spherical import relative
 from idpose_core.synthetic.render_oracle import RenderOracle, scaled_linear_alphas_cumprod
 from idpose_core.synthetic.scenes import CAMERA_RADIUS, SceneRenderer, oracle_objects

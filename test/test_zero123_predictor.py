@@ -8,7 +8,7 @@ import torch
 from diffusers import DDPMScheduler
 from transformers import CLIPImageProcessor
 
-from idpose_core.predictor import NoisePredictor
+from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.zero123 import Zero123Predictor
 
 SIZE = 32

@@ -14,7 +14,7 @@ import numpy as np
 
 from idpose_core.baselines.result import CONVERGED, FEWER, BaselineEstimate
 from idpose_core.cameras import anchor_frame_poses, c2w_to_spherical
-from idpose_core.evaluation import score_poses
+from idpose_core.evaluation.scoring import score_poses
 from idpose_core.metrics import random_relative_poses
 
 

@@ -12,7 +12,7 @@ import torch
 
 from idpose_core.cameras import spherical_to_c2w
 from idpose_core.metrics import pair_errors
-from idpose_core.predictor import NoisePredictor, Views
+from idpose_core.noise_predictor import NoisePredictor, Views
 from idpose_core.spherical import invert
 
 

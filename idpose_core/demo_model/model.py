@@ -22,7 +22,7 @@ from transformers import CLIPVisionModelWithProjection
 from idpose_core.demo_model.config import ZERO123_POSE_DIM, DemoModelConfig
 from idpose_core.demo_model.pose_features import fourier_pose_features
 from idpose_core.spherical import compose
-from idpose_core.zero123.predictor import pose_features
+from idpose_core.zero123.zero123_predictor import pose_features
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"

@@ -8,7 +8,7 @@ from collections.abc import Callable
 import torch
 
 from idpose_core.cancellation import raise_if_cancelled
-from idpose_core.predictor import NoisePredictor, Views
+from idpose_core.noise_predictor import NoisePredictor, Views
 from idpose_core.solver.config import SolverConfig
 from idpose_core.spherical import invert
 

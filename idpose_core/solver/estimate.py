@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from idpose_core.cancellation import checked_in_modules, raise_if_cancelled
-from idpose_core.predictor import NoisePredictor
+from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.solver.config import SolverConfig
 from idpose_core.solver.context import Progress, SolverContext
 from idpose_core.solver.exploration import explore

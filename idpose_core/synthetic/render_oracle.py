@@ -21,7 +21,7 @@ import torch
 import torch.nn.functional as F
 from diffusers import DDPMScheduler
 
-from idpose_core.predictor import Views
+from idpose_core.noise_predictor import Views
 from idpose_core.spherical import TWO_PI, compose
 from idpose_core.synthetic.scenes import CAMERA_RADIUS, ObjectSpec, SceneRenderer
 

@@ -1,20 +1,30 @@
 """Novel-view generation with Zero-1-to-3: DDIM with classifier-free guidance, to check a pose by eye."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import torch
 from diffusers import DDIMScheduler
 from tqdm.auto import tqdm
 
-from idpose_core.predictor import Views
+from idpose_core.noise_predictor import Views
 
-if TYPE_CHECKING:
-    from idpose_core.zero123.predictor import Zero123Predictor
+
+class ConditionedDenoiser(Protocol):
+    """What the sampler needs of a Zero-1-to-3 model (``Zero123Predictor`` is one): its device and scheduler,
+    the cross-attention token of an embedding and a pose, and one conditioned noise prediction."""
+
+    device: torch.device
+    modules: Any  # holds ``scheduler``
+
+    def pose_tokens(self, image_embeds: torch.Tensor, pose: torch.Tensor) -> torch.Tensor: ...
+
+    def predict_noise(self, noisy: torch.Tensor, ref_latents: torch.Tensor, t: torch.Tensor,
+                      tokens: torch.Tensor) -> torch.Tensor: ...
 
 
 @torch.no_grad()
-def sample_view(predictor: Zero123Predictor, views: Views, ref: int, pose, steps: int = 50,
+def sample_view(predictor: ConditionedDenoiser, views: Views, ref: int, pose, steps: int = 50,
                 guidance: float = 3.0, eta: float = 1.0, seed: int = 0) -> torch.Tensor:
     """The view at relative ``pose`` (3,) from view ``ref`` -> (3, H, W) in [-1, 1], float32 on the CPU.
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import torch
 
 from idpose_core.demo_model.model import DemoDiffusionModel
-from idpose_core.predictor import Views
-from idpose_core.zero123.predictor import reduced_precision
+from idpose_core.noise_predictor import Views
+from idpose_core.zero123.zero123_predictor import reduced_precision
 
 EMBEDDED_MODEL_DIR = Path(__file__).resolve().parents[1] / "assets" / "demo_model"
 SOLVER_DEFAULTS_FILE = "solver_defaults.json"

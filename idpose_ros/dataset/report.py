@@ -2,8 +2,8 @@
 
 The per-estimate lines of results.jsonl are merged in plan order (not in the order they finished), so a
 resumed run writes the report an uninterrupted one writes. Metrics per data set and n, as the paper's
-Table 1, beside the random-pose baseline on the same pairs (``evaluate_bag.random_baseline``, seeded per
-estimate as ``evaluate_bag`` seeds it), with the failed estimates counted and listed.
+Table 1, beside the random-pose baseline on the same pairs (``random_baseline``, seeded per estimate as
+``evaluate_bag`` seeds it) and the classical baselines that ran, with the failed estimates counted and listed.
 """
 from __future__ import annotations
 
@@ -19,11 +19,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interactive backend)
 import numpy as np  # noqa: E402
 
+from idpose_core.baselines import TITLES  # noqa: E402
+from idpose_core.evaluation.protocol import EstimateTask  # noqa: E402
+from idpose_core.evaluation.scoring import RANDOM_DRAWS, random_baseline  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
-from idpose_ros.bag_report import RANDOM_METHOD, markdown_table, model_name, summary_table  # noqa: E402
-from idpose_ros.dataset_inputs import DatasetInput  # noqa: E402
-from idpose_ros.dataset_results import Key, task_key  # noqa: E402
-from idpose_ros.evaluate_bag import RANDOM_DRAWS, EstimateTask, random_baseline  # noqa: E402
+from idpose_ros.dataset.inputs import DatasetInput  # noqa: E402
+from idpose_ros.dataset.results import Key, task_key  # noqa: E402
+from idpose_ros.evaluation.bag_report import RANDOM_METHOD, markdown_table, model_name, summary_table  # noqa: E402
 
 ALL = "all data sets"
 
@@ -39,6 +41,7 @@ class DatasetEvaluation:
     random_records: list[dict[str, Any]] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
     missing: int = 0  # planned estimates without a line (an interrupted run)
+    baseline_records: dict[str, list[dict[str, Any]]] = field(default_factory=dict)  # classical method -> pairs
 
     def datasets(self) -> list[str]:
         return list(dict.fromkeys(item["dataset"] for item in self.inputs))
@@ -54,7 +57,9 @@ class DatasetEvaluation:
             return None
         return {"aggregates": aggregate(records),
                 "random_baseline": {"guesses_per_pair": RANDOM_DRAWS,
-                                    "aggregates": aggregate(r for r in self.random_records if keep(r))}}
+                                    "aggregates": aggregate(r for r in self.random_records if keep(r))},
+                "baselines": {name: aggregate(r for r in pairs if keep(r))
+                              for name, pairs in self.baseline_records.items()}}
 
 
 def merge(planned: Sequence[tuple[DatasetInput, Sequence[EstimateTask]]], lines: dict[Key, dict[str, Any]],
@@ -77,6 +82,9 @@ def merge(planned: Sequence[tuple[DatasetInput, Sequence[EstimateTask]]], lines:
                 evaluation.records += [{**where, **pair} for pair in line["pairs"]]
                 evaluation.random_records += [{**where, **guess}
                                               for guess in random_baseline(task.true_c2w[:task.n], task.baseline_seed)]
+                for name, baseline in line.get("baselines", {}).items():
+                    evaluation.baseline_records.setdefault(name, []).extend(
+                        {**where, **pair} for pair in baseline["pairs"])
         evaluation.inputs.append({"input": item.name, "kind": item.kind, "dataset": item.dataset,
                                   "views": item.summary(), "estimates": len(tasks), "succeeded": done,
                                   "failed": failed})
@@ -124,6 +132,8 @@ def write_dataset_report(out: Path, evaluation: DatasetEvaluation) -> str:
         heading = (f"## {dataset}\n\n{len(inputs)} input{'s' if len(inputs) != 1 else ''}, "
                    f"{sum(item['succeeded'] for item in inputs)} estimates, {failed} failed.\n\n")
         sections.append(heading + (markdown_table({method: scores["aggregates"],
+                                                   **{TITLES[name]: aggregates
+                                                      for name, aggregates in scores["baselines"].items()},
                                                    RANDOM_METHOD: scores["random_baseline"]["aggregates"]})
                                    if scores else "No estimate succeeded."))
     per_input = {f"{item['dataset']}/{Path(item['input']).name}": run.scores(input_name=item["input"])

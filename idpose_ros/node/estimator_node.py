@@ -1,7 +1,7 @@
 """`ros2 run idpose_ros estimator`: buffers views of an object, estimates their camera poses, publishes them.
 
 Glue only: messages go through msg_adapters, every number through idpose_core.pipeline. The
-solver runs on a worker thread (``EstimationWorker``) while a multi-threaded executor keeps
+solver runs on a thread of its own (``JobRunner``) while a multi-threaded executor keeps
 image callbacks, services and diagnostics responsive.
 """
 from __future__ import annotations
@@ -30,15 +30,15 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from idpose_core.model_loading import load_predictor
+from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.pipeline import PipelineResult, estimate_view_poses, views_mosaic
-from idpose_core.predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_core.solver import Progress
-from idpose_ros.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array, result_inputs
-from idpose_ros.estimation_worker import EstimationWorker, Outcome
-from idpose_ros.input_sync import IMAGE_INPUTS, InputSync
-from idpose_ros.model_holder import ModelHolder
-from idpose_ros.parameters import (
+from idpose_ros.node.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array, result_inputs
+from idpose_ros.node.input_sync import IMAGE_INPUTS, InputSync
+from idpose_ros.node.job_runner import JobRunner, Outcome
+from idpose_ros.node.model_holder import ModelHolder
+from idpose_ros.node.parameters import (
     NodeSettings,
     current_values,
     declare_parameters,
@@ -46,9 +46,9 @@ from idpose_ros.parameters import (
     optical_from_imu,
     pipeline_settings,
 )
-from idpose_ros.raw_image import RawImage
-from idpose_ros.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
-from idpose_ros.view_inputs import with_inputs
+from idpose_ros.node.raw_image import RawImage
+from idpose_ros.node.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
+from idpose_ros.view_decoding import with_inputs
 from msg_adapters import (
     AdapterError,
     ImageTooLarge,
@@ -74,7 +74,7 @@ SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 IMU_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
-def inputs_used(view: View) -> str:
+def view_inputs_text(view: View) -> str:
     """", with depth, gravity" etc. for the inputs a kept view has (and ", depth pending" for those still to come)."""
     have = [name for name, value in (("mask", view.input.mask), ("depth", view.input.depth),
                                      ("intrinsics", view.input.intrinsics), ("gravity", view.input.gravity_up),
@@ -99,7 +99,7 @@ class EstimatorNode(Node):
         self._sync = InputSync(settings.gravity, optical_from_imu(settings), settings.imu_window,
                                settings.input_tolerance)
         self._roi: tuple[int, int, int, int] | None = None  # the latest region of interest, for views kept later
-        self._worker = EstimationWorker(self.get_logger().info)
+        self._jobs = JobRunner(self.get_logger().info)
         self._model = ModelHolder(self._load_model, self._model_unavailable)
         self._status_lock = threading.Lock()
         self._state = "idle"
@@ -271,7 +271,7 @@ class EstimatorNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    # ----- services (each answers at once: nothing here waits for the worker) ----------------------------------
+    # ----- services (each answers at once: nothing here waits for the running job) ----------------------------------
     def _capture(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
             view, count = self._buffer.keep_latest(self._prepare, self._now())
@@ -283,7 +283,7 @@ class EstimatorNode(Node):
             response.success, response.message = False, str(exc)
             return response
         self._kept(view, count, node_settings(current_values(self)))
-        response.success, response.message = True, f"captured view {count} ({view.source}{inputs_used(view)})"
+        response.success, response.message = True, f"captured view {count} ({view.source}{view_inputs_text(view)})"
         return response
 
     def _estimate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -314,7 +314,7 @@ class EstimatorNode(Node):
     def _cancel_run(self, cause: str) -> int | None:
         """Ask the running estimate to stop; its run id, or None when none is running."""
         with self._status_lock:
-            if self._state != "estimating" or not self._worker.cancel():
+            if self._state != "estimating" or not self._jobs.cancel():
                 return None
             self._state, self._cancelled_by = "cancelling", cause
             return self._run_id
@@ -353,9 +353,9 @@ class EstimatorNode(Node):
             run_id = self._run_id + 1
 
             def on_done(outcome: Outcome) -> None:
-                self._on_estimated(outcome, run_id, views, frame_id, settings.object_distance)
+                self._on_estimated(outcome, run_id, views, frame_id)
 
-            refusal = self._worker.start("estimate", job, on_done)
+            refusal = self._jobs.start("estimate", job, on_done)
             if refusal is None:
                 self._run_id, self._state, self._last_error = run_id, "estimating", ""
         if refusal is not None:
@@ -367,8 +367,7 @@ class EstimatorNode(Node):
                                       f"publishing the poses in frame '{FALLBACK_FRAME}'")
         return run_id, None
 
-    def _on_estimated(self, outcome: Outcome, run_id: int, views: list[View], frame_id: str,
-                      object_distance: float) -> None:
+    def _on_estimated(self, outcome: Outcome, run_id: int, views: list[View], frame_id: str) -> None:
         if outcome.status == "cancelled":
             cause = self._cancelled_by
             kept = {"~/reset": "its views were dropped",
@@ -386,7 +385,7 @@ class EstimatorNode(Node):
             self._finish(run_id, "failed", outcome.error)
             return
         result: PipelineResult = outcome.value
-        self._publish(result, views[0], frame_id, object_distance)
+        self._publish(result, views[0], frame_id)
         solved = result.solver_result
         with self._status_lock:
             self._last_run_seconds = outcome.seconds
@@ -397,10 +396,12 @@ class EstimatorNode(Node):
         self.get_logger().info(f"published {len(result.poses)} poses in frame '{frame_id}' "
                                f"after {outcome.seconds:.1f} s ({int(sum(self._ambiguous))} ambiguous)")
 
-    def _publish(self, result: PipelineResult, anchor: View, frame_id: str, object_distance: float) -> None:
+    def _publish(self, result: PipelineResult, anchor: View, frame_id: str) -> None:
+        """Poses, markers and the views the model saw; the markers are sized by the distance the poses use
+        (measured from depth when the anchor had it)."""
         self._poses_pub.publish(poses_to_pose_array(result.poses, frame_id, anchor.stamp))
         self._markers_pub.publish(camera_markers(result.poses, frame_id, anchor.stamp,
-                                                 depth=MARKER_DEPTH * object_distance))
+                                                 depth=MARKER_DEPTH * result.object_distance))
         mosaic = array_to_image(views_mosaic(result.preprocessed.images), "rgb8")
         mosaic.header.frame_id, mosaic.header.stamp = frame_id, anchor.stamp
         self._views_pub.publish(mosaic)
@@ -418,7 +419,7 @@ class EstimatorNode(Node):
 
     def status(self) -> EstimatorStatus:
         """A consistent snapshot of what /diagnostics reports."""
-        progress = self._worker.progress
+        progress = self._jobs.progress
         with self._status_lock:
             return EstimatorStatus(
                 state=self._state, run_id=self._run_id, views_buffered=len(self._buffer),
@@ -440,7 +441,7 @@ class EstimatorNode(Node):
         """Cancel a running estimate and wait up to ``timeout`` s; True when nothing is left running."""
         if self._cancel_run("shutdown") is not None:
             self.get_logger().info("shutting down: cancelling the running estimate")
-        return self._worker.wait(timeout)
+        return self._jobs.wait(timeout)
 
 
 def _interrupt(signum: int, frame: Any) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 
-from idpose_core.predictor import Views
+from idpose_core.noise_predictor import Views
 from idpose_core.zero123.config import Zero123Config
 from idpose_core.zero123.ldm_checkpoint import load_ldm_checkpoint
 from idpose_core.zero123.loading import load_diffusers_folder, save_diffusers_folder

@@ -2,7 +2,7 @@
 
 Every topic is optional. Depth and mask images are kept for a short while and matched to a view's
 stamp within ``tolerance`` (one that has not arrived yet when the view is kept is attached when it
-does, see ``ViewBuffer.attach``); the latest CameraInfo whose size fits the image is used; gravity
+does, see ``ViewBuffer.complete``); the latest CameraInfo whose size fits the image is used; gravity
 comes from the accelerometer (its readings averaged over ``imu_window`` before the stamp, turned into
 the optical frame by ``optical_from_imu``) or from the optical frame's orientation in a frame whose
 +z is up, and is looked up when the view is kept. Thread-safe: the node's callbacks feed it while
@@ -18,8 +18,14 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from sensor_msgs.msg import CameraInfo, Image, Imu
 
-from idpose_core.evaluation import match_stamps
-from idpose_core.gravity import GravityUnavailable, resting_acceleration, up_from_acceleration, up_from_orientation
+from idpose_core.gravity import (
+    IMU_WINDOW_S,
+    GravityUnavailable,
+    resting_acceleration,
+    up_from_acceleration,
+    up_from_orientation,
+)
+from idpose_core.stamps import INPUT_TOLERANCE_S, match_stamps
 from msg_adapters import imu_acceleration, orientation_rotation, stamp_nanoseconds
 
 GRAVITY_MODES = ("off", "auto", "required")
@@ -57,8 +63,8 @@ class InputSync:
     ``active_ns``: a topic counts as live while its last message is younger than this.
     """
 
-    def __init__(self, gravity: str = "auto", optical_from_imu: np.ndarray | None = None, imu_window: float = 0.1,
-                 tolerance: float = 0.02, active: float = 5.0) -> None:
+    def __init__(self, gravity: str = "auto", optical_from_imu: np.ndarray | None = None,
+                 imu_window: float = IMU_WINDOW_S, tolerance: float = INPUT_TOLERANCE_S, active: float = 5.0) -> None:
         if gravity not in GRAVITY_MODES:
             raise ValueError(f"gravity must be one of {', '.join(GRAVITY_MODES)}, got {gravity!r}")
         self.gravity = gravity

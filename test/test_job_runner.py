@@ -4,7 +4,7 @@ import threading
 
 import pytest
 
-from idpose_ros.estimation_worker import EstimationWorker, Outcome
+from idpose_ros.node.job_runner import JobRunner, Outcome
 
 TIMEOUT = 10.0
 
@@ -29,7 +29,7 @@ def recorder() -> Recorder:
 
 @pytest.fixture
 def worker(recorder):
-    worker = EstimationWorker(recorder.lines.append)
+    worker = JobRunner(recorder.lines.append)
     yield worker
     worker.cancel()
     assert worker.wait(TIMEOUT)

@@ -25,16 +25,19 @@ from rclpy.logging import LoggingSeverity, set_logger_level
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.time import Time
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
-from idpose_core.evaluation import PICK_SIZE, ViewSetEstimate
+from idpose_core.evaluation.estimator import ViewSetEstimate
+from idpose_core.evaluation.picks import PICK_SIZE
 from idpose_core.gravity import level_from_optical
 from idpose_core.solver import Progress
-from idpose_ros.bag_views import ViewMessages
-from idpose_ros.diagnostics import RUNNING_STATES, STATUS_NAME
-from idpose_ros.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
+from idpose_core.view_input import ViewInput
+from idpose_ros.node.diagnostics import RUNNING_STATES, STATUS_NAME
+from idpose_ros.node.estimator_node import NODE_NAME, RESULT_QOS, EstimatorNode
+from idpose_ros.view_decoding import ViewMessages, encode_view
 from msg_adapters import matrix_to_pose, pose_to_matrix, stamp_nanoseconds
 
 SERVICE_TIMEOUT = 10.0  # s to wait for a service call, a subscriber or a parameter change
@@ -45,6 +48,8 @@ INPUTS_SETTLE = 0.1  # s between publishing a view's other inputs and its image 
 IN_PROCESS_DIAGNOSTICS_PERIOD = 0.2  # s, for a node started here
 # Node parameters a replay sets besides the solver's; a running node gets its own values back on close().
 RUN_ID = re.compile(r"\(run (\d+)\)$")  # how the ~/estimate answer ends: "... (run 7)"
+REPLAY_FRAME = "replay_camera"  # frame_id of the replayed views
+VIEW_STAMP_STEP_NS = 100_000_000  # replayed views are stamped 0.1 s apart: far more than any input tolerance
 REPLAY_PARAMETERS = ("anchor_polar_deg", "object_distance", "capture_mode", "views_per_estimate", "max_views",
                      "anchor_frame")
 
@@ -210,14 +215,17 @@ class ReplayEstimator:
                           f"{response.message}")
 
     # ----- one view set ---------------------------------------------------------------------------------------------
-    def __call__(self, views: Sequence[ViewMessages], anchor_polar_deg: float, object_distance: float,
+    def __call__(self, views: Sequence[ViewInput], anchor_polar_deg: float, object_distance: float,
                  progress: Progress | None = None) -> ViewSetEstimate:
-        messages = [view.image for view in views]
+        start = self._client.get_clock().now().nanoseconds
+        encoded = [encode_view(view, Time(nanoseconds=start + k * VIEW_STAMP_STEP_NS).to_msg(), REPLAY_FRAME)
+                   for k, view in enumerate(views)]
+        messages = [view.image for view in encoded]
         self._set_parameters({**self.values, "anchor_polar_deg": float(anchor_polar_deg),
                               "object_distance": float(object_distance), "capture_mode": "on_request",
                               "views_per_estimate": 0, "max_views": PICK_SIZE, "anchor_frame": ""})
         self._call("reset")
-        for view in views:
+        for view in encoded:
             self._capture(view)
         with self._lock:
             self._poses = None

@@ -14,11 +14,11 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from idpose_core.gravity import rx, ry, rz
-from idpose_core.pipeline import PipelineSettings
+from idpose_core.gravity import IMU_WINDOW_S, rotation_from_extrinsic
+from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, MODEL_IMAGE_SIZE, PipelineSettings
 from idpose_core.solver import SolverConfig
-from idpose_core.transforms import quaternion_to_matrix
-from idpose_ros.input_sync import GRAVITY_MODES
+from idpose_core.stamps import INPUT_TOLERANCE_S
+from idpose_ros.node.input_sync import GRAVITY_MODES
 
 INT32_MAX = 2**31 - 1
 
@@ -59,11 +59,11 @@ class NodeSettings:
         "images are refused", bounds=(32 * 32, 2**28)))
     anchor_polar_deg: float = field(default=90.0, metadata=_spec(
         "polar angle of the anchor camera around the object (deg from world up +z; 90 = level), "
-        "turns relative spherical poses into SE(3) and narrows the polar search", bounds=(1.0, 179.0)))
+        "turns relative spherical poses into SE(3) and narrows the polar search", bounds=ANCHOR_POLAR_RANGE_DEG))
     object_distance: float = field(default=1.0, metadata=_spec(
         "anchor camera to object centre (m): the metric scale of the published positions",
         bounds=(0.001, 1000.0)))
-    image_size: int = field(default=256, metadata=_spec(
+    image_size: int = field(default=MODEL_IMAGE_SIZE, metadata=_spec(
         "side in pixels of the preprocessed views the model sees (Zero-1-to-3: 256)", bounds=(16, 1024)))
     anchor_frame: str = field(default="", metadata=_spec(
         "frame_id of the published poses; empty = the anchor image's header.frame_id"))
@@ -76,10 +76,10 @@ class NodeSettings:
     imu_to_optical: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 1.0], metadata=_spec(
         "rotation from the imu topic's frame to the camera's optical frame: a quaternion x y z w, or roll pitch "
         "yaw in radians (a RealSense accel or imu topic: 0 0 0 1)", read_only=True))
-    imu_window: float = field(default=0.1, metadata=_spec(
+    imu_window: float = field(default=IMU_WINDOW_S, metadata=_spec(
         "seconds of accelerometer readings before an image averaged into its gravity", bounds=(0.0, 5.0),
         read_only=True))
-    input_tolerance: float = field(default=0.02, metadata=_spec(
+    input_tolerance: float = field(default=INPUT_TOLERANCE_S, metadata=_spec(
         "largest stamp difference (s) between an image and its depth, mask or gravity reading",
         bounds=(0.0, 1.0), read_only=True))
 
@@ -138,10 +138,10 @@ def problem(values: dict[str, Any]) -> str | None:
     for name, _, spec in parameter_table():
         if spec["choices"] and values[name] not in spec["choices"]:
             return f"{name} must be one of {', '.join(spec['choices'])}, got {values[name]!r}"
-    if len(values["imu_to_optical"]) not in (3, 4) or (len(values["imu_to_optical"]) == 4 and not any(
-            values["imu_to_optical"])):
-        return (f"imu_to_optical must be a quaternion x y z w (not all zero) or roll pitch yaw, got "
-                f"{list(values['imu_to_optical'])}")
+    try:
+        rotation_from_extrinsic(values["imu_to_optical"])
+    except ValueError as exc:
+        return f"imu_to_optical: {exc}"
     if values["views_per_estimate"] > values["max_views"]:
         return (f"views_per_estimate ({values['views_per_estimate']}) cannot exceed max_views "
                 f"({values['max_views']})")
@@ -173,12 +173,8 @@ def node_settings(values: dict[str, Any]) -> NodeSettings:
 
 
 def optical_from_imu(settings: NodeSettings) -> np.ndarray:
-    """The ``imu_to_optical`` rotation (3, 3): from a quaternion x y z w or roll pitch yaw (rad, fixed axes)."""
-    values = np.asarray(settings.imu_to_optical, dtype=np.float64)
-    if len(values) == 4:
-        return quaternion_to_matrix(values)
-    roll, pitch, yaw = values
-    return rz(yaw) @ ry(pitch) @ rx(roll)
+    """The ``imu_to_optical`` rotation (3, 3) (``rotation_from_extrinsic``: a quaternion or roll pitch yaw)."""
+    return rotation_from_extrinsic(settings.imu_to_optical)
 
 
 def current_values(node: Node) -> dict[str, Any]:

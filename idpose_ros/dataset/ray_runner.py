@@ -1,8 +1,8 @@
 """Estimates on Ray: one actor per worker holds the model, one actor call per estimate, failures retried once.
 
 The same code runs on a local Ray instance (started here, sized to the machine) and on a cluster
-(``address``): the driver reads the inputs and ships each estimate's images through Ray's object
-store, so the workers need the Python environment and the model path, not the data.
+(``address``): the driver reads the inputs and ships each estimate's decoded views through Ray's
+object store, so the workers need the Python environment and the model path, not the data.
 """
 from __future__ import annotations
 
@@ -18,9 +18,10 @@ import ray
 import torch
 from ray.exceptions import RayActorError, RayError, RayTaskError
 
-from idpose_ros.bag_views import ViewMessages
-from idpose_ros.estimators import EstimatorOptions, make_estimator
-from idpose_ros.evaluate_bag import EstimateOutcome, EstimateTask, run_estimate
+from idpose_core.evaluation.protocol import EstimateTask
+from idpose_core.evaluation.run import EstimateOutcome, run_estimate
+from idpose_core.view_input import ViewInput
+from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
 
 WAIT_SECONDS = 1.0  # ray.wait slices: Ctrl-C is handled between them
 SOURCE_ROOT = Path(__file__).resolve().parents[1]  # the folder holding idpose_ros, idpose_core, msg_adapters
@@ -42,11 +43,11 @@ class WorkerResources:
 
 @dataclass(frozen=True)
 class Job:
-    """One estimate to run: its key (what results.jsonl knows it by), the task and its views' images."""
+    """One estimate to run: its key (what results.jsonl knows it by), the task and its decoded views."""
 
     key: Hashable
     task: EstimateTask
-    messages: list[ViewMessages]
+    views: list[ViewInput]
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,7 @@ class JobResult:
     error: str | None = None
 
 
-class EstimatorWorker:
+class RayEstimatorActor:
     """The state of one Ray actor: the estimator with its model, loaded once, on ``threads`` torch threads."""
 
     def __init__(self, options: EstimatorOptions, threads: int):
@@ -73,11 +74,12 @@ class EstimatorWorker:
         """The worker's name (host:pid), once its model is loaded."""
         return self.name
 
-    def estimate(self, task: EstimateTask, messages: list[ViewMessages]) -> tuple[EstimateOutcome, str]:
-        """``run_estimate`` on this worker's estimator, less the random baseline (the driver redraws it from the
-        task's seed when it merges the report)."""
-        outcome = run_estimate(self.estimator, task, messages)
-        return EstimateOutcome(outcome.records, [], outcome.row, outcome.predicted_c2w), self.name
+    def estimate(self, task: EstimateTask, views: list[ViewInput], baselines: tuple[str, ...] = ()
+                 ) -> tuple[EstimateOutcome, str]:
+        """``run_estimate`` on this worker's estimator (and the named classical baselines), less the random
+        baseline (the driver redraws it from the task's seed when it merges the report)."""
+        outcome = run_estimate(self.estimator, task, views, baselines=baselines)
+        return EstimateOutcome(outcome.records, [], outcome.row, outcome.predicted_c2w, outcome.baselines), self.name
 
 
 @contextmanager
@@ -119,10 +121,10 @@ def error_text(err: RayError) -> str:
 
 @dataclass
 class _Attempt:
-    """A job in flight: which try this is, and its images in the object store (kept for a retry)."""
+    """A job in flight: which try this is, and its views in the object store (kept for a retry)."""
 
     job: Job
-    messages: ray.ObjectRef
+    views: ray.ObjectRef
     number: int = 1
 
 
@@ -134,8 +136,9 @@ class EstimatorPool:
     context manager: the actors stop when the block ends, also on Ctrl-C.
     """
 
-    def __init__(self, options: EstimatorOptions, resources: WorkerResources, retries: int = 1):
-        self.options, self.resources, self.retries = options, resources, retries
+    def __init__(self, options: EstimatorOptions, resources: WorkerResources, retries: int = 1,
+                 baselines: tuple[str, ...] = ()):
+        self.options, self.resources, self.retries, self.baselines = options, resources, retries, baselines
         self._actors: list = []
         self._pending: dict = {}  # ObjectRef -> (actor, its _Attempt, or None for a ready() call)
         self._idle: deque = deque()
@@ -152,7 +155,7 @@ class EstimatorPool:
         self._pending.clear()
 
     def _start_worker(self) -> None:
-        actor_class = ray.remote(EstimatorWorker).options(
+        actor_class = ray.remote(RayEstimatorActor).options(
             num_cpus=self.resources.num_cpus, num_gpus=self.resources.num_gpus, max_restarts=0,
             runtime_env={"env_vars": {"PYTHONPATH": f"{SOURCE_ROOT}{os.pathsep}${{PYTHONPATH}}"}})
         actor = actor_class.remote(self.options, self.resources.num_cpus)
@@ -168,9 +171,9 @@ class EstimatorPool:
                 job = next(upcoming, None)
                 if job is None:
                     return False
-                attempt = _Attempt(job, ray.put(job.messages))
+                attempt = _Attempt(job, ray.put(job.views))
             actor = self._idle.popleft()
-            self._pending[actor.estimate.remote(attempt.job.task, attempt.messages)] = (actor, attempt)
+            self._pending[actor.estimate.remote(attempt.job.task, attempt.views, self.baselines)] = (actor, attempt)
         return True
 
     def _failed(self, actor, attempt: _Attempt | None, err: RayError) -> JobResult | None:

@@ -13,9 +13,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from idpose_ros.dataset_inputs import DatasetInput
-from idpose_ros.evaluate_bag import EstimateTask
-from idpose_ros.ray_runner import JobResult
+from idpose_core.evaluation.protocol import EstimateTask
+from idpose_ros.dataset.inputs import DatasetInput
+from idpose_ros.dataset.ray_runner import JobResult
 
 RESULTS_FILE = "results.jsonl"
 SETTINGS_FILE = "run.json"
@@ -47,7 +47,9 @@ def result_line(item: DatasetInput, result: JobResult, solver_seed: int) -> dict
     row = result.outcome.row
     return {**line, "worker": result.worker, "seconds": row["seconds"], "anchor_polar_deg": row["anchor_polar_deg"],
             "object_distance": row["object_distance"], "true_c2w": task.true_c2w[:task.n].tolist(),
-            "predicted_c2w": result.outcome.predicted_c2w.tolist(), "pairs": result.outcome.records}
+            "predicted_c2w": result.outcome.predicted_c2w.tolist(), "pairs": result.outcome.records,
+            "baselines": {name: {"pairs": records, "row": baseline_row}
+                          for name, (records, baseline_row) in result.outcome.baselines.items()}}
 
 
 class ResultsLog:

@@ -1,23 +1,41 @@
 """A view's messages -> the pipeline's ``ViewInput``: image, depth, mask and intrinsics decoded by msg_adapters.
 
-The node and the bag evaluator both go through these functions, so a view means the same to both.
+The node and the bag readers both go through these functions, so a view means the same to both;
+``view_messages`` goes the other way, for a client that sends decoded views to the node.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from std_msgs.msg import Header
 
 from idpose_core.view_input import ViewInput
 from msg_adapters import (
     AdapterError,
+    array_to_image,
     camera_info_to_matrix,
     compressed_to_rgb,
+    depth_to_image,
     image_to_depth,
     image_to_mask,
     image_to_rgb,
+    matrix_to_camera_info,
 )
+
+
+@dataclass(frozen=True)
+class ViewMessages:
+    """One view as messages: its image and the depth, mask and CameraInfo that go with it (None where there is
+    none), and world up in its optical frame (None without gravity)."""
+
+    image: Image | CompressedImage
+    depth: Image | None = None
+    mask: Image | None = None
+    camera_info: CameraInfo | None = None
+    gravity_up: np.ndarray | None = None
 
 
 def decode_image(message: Image | CompressedImage, max_pixels: int | None = None
@@ -53,8 +71,26 @@ def with_inputs(view: ViewInput, depth: Image | None = None, mask: Image | None 
     return replace(view, **changes)
 
 
-def view_input(image: Image | CompressedImage, depth: Image | None = None, mask: Image | None = None,
+def decode_view(image: Image | CompressedImage, depth: Image | None = None, mask: Image | None = None,
                camera_info: CameraInfo | None = None, gravity_up: np.ndarray | None = None,
                roi: tuple[int, int, int, int] | None = None) -> ViewInput:
     """Decode one view and its inputs (``with_inputs``)."""
     return with_inputs(ViewInput(*decode_image(image)), depth, mask, camera_info, gravity_up, roi)
+
+
+def encode_view(view: ViewInput, stamp: Time, frame_id: str) -> ViewMessages:
+    """A decoded view as the messages a camera driver would publish, all stamped ``stamp`` in ``frame_id``: the
+    image (rgba8 with its alpha, else rgb8), depth (32FC1 metres), mask (mono8 0/255) and CameraInfo; lossless,
+    so ``decode_view`` gives the view back."""
+    def header() -> Header:
+        return Header(stamp=stamp, frame_id=frame_id)
+
+    height, width = view.rgb.shape[:2]
+    image = (array_to_image(np.dstack([view.rgb, view.alpha]), "rgba8", header()) if view.alpha is not None
+             else array_to_image(view.rgb, "rgb8", header()))
+    depth = depth_to_image(view.depth, "32FC1", header()) if view.depth is not None else None
+    mask = (array_to_image(np.where(np.asarray(view.mask, dtype=bool), 255, 0).astype(np.uint8), "mono8", header())
+            if view.mask is not None else None)
+    camera_info = (matrix_to_camera_info(view.intrinsics, width, height, header()) if view.intrinsics is not None
+                   else None)
+    return ViewMessages(image, depth, mask, camera_info, view.gravity_up)

@@ -1,8 +1,9 @@
 """A bag's views and their ground-truth camera poses, as numpy: images, /tf + /tf_static, PoseStamped.
 
 Images and PoseStamped are deserialized by rclpy into real message classes (so decoding stays in
-``msg_adapters``); /tf and /tf_static go through ``rosbags`` (tf2_msgs is not available to rclpy
-here) into ``idpose_core.transforms.TransformBuffer``. Glue only: no maths of its own.
+``msg_adapters``); /tf and /tf_static go through ``rosbags`` (tf2_msgs need not be installed for
+rclpy) into ``idpose_core.transforms.TransformBuffer``. Scanning checks each image's layout without
+decoding it; ``load_views`` decodes the views an evaluation uses, once. Glue only: no maths of its own.
 """
 from __future__ import annotations
 
@@ -17,12 +18,27 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Imu
 from tqdm import tqdm
 
-from idpose_core.evaluation import match_stamps
-from idpose_core.gravity import GravityUnavailable, resting_acceleration, up_from_acceleration, up_from_orientation
-from idpose_core.transforms import TransformBuffer, TransformLookupError, quaternion_to_matrix
-from idpose_ros.bag_io import BagError, open_bag, topic_connections
-from idpose_ros.view_inputs import decode_image
-from msg_adapters import AdapterError, imu_acceleration, orientation_rotation, pose_to_matrix, stamp_nanoseconds
+from idpose_core.gravity import (
+    IMU_WINDOW_S,
+    GravityUnavailable,
+    resting_acceleration,
+    rotation_from_extrinsic,
+    up_from_acceleration,
+    up_from_orientation,
+)
+from idpose_core.stamps import INPUT_TOLERANCE_S, match_stamps
+from idpose_core.transforms import TransformBuffer, TransformLookupError
+from idpose_core.view_input import ViewInput
+from idpose_ros.evaluation.bag_io import BagError, open_bag, topic_connections
+from idpose_ros.view_decoding import ViewMessages, decode_view
+from msg_adapters import (
+    AdapterError,
+    check_image,
+    imu_acceleration,
+    orientation_rotation,
+    pose_to_matrix,
+    stamp_nanoseconds,
+)
 
 IMAGE_TYPES = {"sensor_msgs/msg/Image": Image, "sensor_msgs/msg/CompressedImage": CompressedImage}
 TRANSPORTS = ("compressed", "compressedDepth", "theora", "zstd")  # image_transport's sub-topic suffixes
@@ -49,8 +65,9 @@ class ExtraTopics:
     CameraInfo nearest in time, when the bag has the topic at all).
 
     ``gravity_topic`` carries sensor_msgs/Imu (its acceleration averaged over the ``imu_window`` s
-    before the image, turned into the optical frame by ``imu_to_optical`` (x, y, z, w) or else by the
-    bag's transforms from the Imu's frame to the image's) or the camera's orientation in a frame whose
+    before the image, turned into the optical frame by ``imu_to_optical`` (a quaternion x y z w or roll
+    pitch yaw in radians, as the node's parameter takes it) or else by the bag's transforms from the
+    Imu's frame to the image's) or the camera's orientation in a frame whose
     +z is up (geometry_msgs/PoseStamped or QuaternionStamped). A view that lacks a requested input is
     skipped, with the reason.
     """
@@ -59,9 +76,9 @@ class ExtraTopics:
     mask_topic: str | None = None
     camera_info_topic: str | None = None
     gravity_topic: str | None = None
-    imu_to_optical: tuple[float, float, float, float] | None = None
-    tolerance: float = 0.02
-    imu_window: float = 0.1
+    imu_to_optical: tuple[float, ...] | None = None
+    tolerance: float = INPUT_TOLERANCE_S
+    imu_window: float = IMU_WINDOW_S
 
     @property
     def topics(self) -> dict[str, str]:
@@ -109,7 +126,8 @@ def default_camera_info_topic(image_topic: str) -> str:
 
 
 def _scan_images(reader, image_topic: str) -> tuple[list[ViewInfo], dict[int, str]]:
-    """Header of every image on the topic (in bag order) and the ids of those that do not decode."""
+    """Header of every image on the topic (in bag order) and the ids of those that are not well formed (checked
+    without decoding their pixels)."""
     views, broken = [], {}
     connections = topic_connections(reader, image_topic, tuple(IMAGE_TYPES))
     scan = tqdm(reader.messages(connections=connections), total=sum(c.msgcount for c in connections),
@@ -117,7 +135,7 @@ def _scan_images(reader, image_topic: str) -> tuple[list[ViewInfo], dict[int, st
     for view_id, (connection, _, raw) in enumerate(scan):
         message = deserialize_message(raw, IMAGE_TYPES[connection.msgtype])
         try:
-            decode_image(message)
+            check_image(message)
         except AdapterError as err:
             broken[view_id] = f"bad image: {err}"
         views.append(ViewInfo(view_id, stamp_nanoseconds(message.header.stamp), message.header.frame_id.lstrip("/")))
@@ -197,7 +215,7 @@ def _gravity(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: Transfo
             try:
                 a = resting_acceleration(stamps, accelerations, view.stamp, window, tolerance)
                 if extras.imu_to_optical is not None:
-                    optical_from_imu = quaternion_to_matrix(np.asarray(extras.imu_to_optical))
+                    optical_from_imu = rotation_from_extrinsic(extras.imu_to_optical)
                 else:
                     optical_from_imu = buffer.lookup(view.frame_id, imu_frame, view.stamp)[:3, :3]
                 ups[view.view_id] = up_from_acceleration(a, optical_from_imu)
@@ -269,33 +287,20 @@ def read_bag_views(path: str | Path, image_topic: str, world_frame: str = "world
                     extras={view_id: sources[view_id] for view_id in poses})
 
 
-@dataclass(frozen=True)
-class ViewMessages:
-    """One view as recorded: its image message and the matched depth, mask and CameraInfo messages (None where
-    not requested), and world up in its optical frame (None without a gravity topic)."""
-
-    image: Image | CompressedImage
-    depth: Image | None = None
-    mask: Image | None = None
-    camera_info: CameraInfo | None = None
-    gravity_up: np.ndarray | None = None
-
-
-def load_view_messages(path: str | Path, image_topic: str, view_ids: set[int], bag: BagViews | None = None,
-                       extras: ExtraTopics = ExtraTopics()) -> dict[int, ViewMessages]:
+def _read_view_messages(path: str | Path, image_topic: str, view_ids: set[int], bag: BagViews,
+                        extras: ExtraTopics) -> dict[int, ViewMessages]:
     """The chosen views' messages, read again from the bag (their other inputs as ``bag.extras`` matched them)."""
     messages: dict[int, ViewMessages] = {}
     wanted: dict[str, dict[int, list[int]]] = {}  # kind -> message index on its topic -> views
-    for view_id in view_ids if bag else ():
+    for view_id in view_ids:
         for kind, index in bag.extras[view_id].messages.items():
             wanted.setdefault(kind, {}).setdefault(index, []).append(view_id)
     with open_bag(path) as reader:
         connections = topic_connections(reader, image_topic, tuple(IMAGE_TYPES))
         for view_id, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
             if view_id in view_ids:
-                gravity = bag.extras[view_id].gravity_up if bag and view_id in bag.extras else None
                 messages[view_id] = ViewMessages(deserialize_message(raw, IMAGE_TYPES[connection.msgtype]),
-                                                 gravity_up=gravity)
+                                                 gravity_up=bag.extras[view_id].gravity_up)
         for kind, topic in extras.topics.items():
             if kind not in wanted:
                 continue
@@ -306,3 +311,16 @@ def load_view_messages(path: str | Path, image_topic: str, view_ids: set[int], b
                     messages[view_id] = replace(messages[view_id],
                                                 **{kind: deserialize_message(raw, types[connection.msgtype])})
     return messages
+
+
+def load_views(path: str | Path, image_topic: str, view_ids: set[int], bag: BagViews,
+               extras: ExtraTopics = ExtraTopics()) -> tuple[dict[int, ViewInput], dict[int, str]]:
+    """The chosen usable views decoded, once each, with their other inputs (as ``bag.extras`` matched them); and
+    why any of them could not be decoded (view id -> reason), so that only the estimates holding it fail."""
+    views, problems = {}, {}
+    for view_id, view in _read_view_messages(path, image_topic, view_ids, bag, extras).items():
+        try:
+            views[view_id] = decode_view(view.image, view.depth, view.mask, view.camera_info, view.gravity_up)
+        except AdapterError as err:
+            problems[view_id] = f"it does not decode: {err}"
+    return views, problems

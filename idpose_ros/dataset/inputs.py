@@ -1,7 +1,7 @@
 """The inputs of a data-set evaluation: rosbag2 bags and the official ID-Pose data layout.
 
-Both kinds plan ``EstimateTask``s (``evaluate_bag``'s unit of work) and hand out their views as the
-``ViewMessages`` the estimators take, so every input goes through the same estimator code. A bag's picks are
+Both kinds plan ``EstimateTask``s (the protocol's unit of work) and hand out their views decoded, as the
+``ViewInput``s the estimators take, so every input goes through the same estimator code. A bag's picks are
 drawn as ``evaluate_bag`` draws them; the official layout's samples JSON fixes them instead:
 ``{"data_root": "data/omni3d/", "samples": [{"name": <object>, "anchor_vid": 94, "target_vids": [15, 25]}]}``
 with ``<data_root>/<object>/images/<vid>.png`` (RGBA, alpha = object mask) and ``poses/<vid>.npy``
@@ -17,22 +17,15 @@ from typing import Any, Protocol
 
 import cv2
 import numpy as np
-from sensor_msgs.msg import Image
 
-from idpose_ros.bag_io import BagError
-from idpose_ros.bag_views import BagViews, ViewMessages, load_view_messages
-from idpose_ros.evaluate_bag import (
-    EstimateTask,
-    EvaluationProtocol,
-    GroundTruthOptions,
-    plan_tasks,
-    read_views,
-    require_usable,
-    tasks_for_picks,
-)
-from msg_adapters import AdapterError, array_to_image
+from idpose_core.evaluation.protocol import EstimateTask, EvaluationProtocol, tasks_for_picks
+from idpose_core.view_input import ViewInput
+from idpose_ros.evaluation.bag_evaluation import plan_bag
+from idpose_ros.evaluation.bag_io import BagError
+from idpose_ros.evaluation.bag_views import BagViews, load_views
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views, require_usable
 
-PNG_ENCODINGS = {1: ("mono8", None), 3: ("rgb8", cv2.COLOR_BGR2RGB), 4: ("rgba8", cv2.COLOR_BGRA2RGBA)}
+PNG_TO_RGB = {1: cv2.COLOR_GRAY2RGB, 3: cv2.COLOR_BGR2RGB, 4: cv2.COLOR_BGRA2RGB}
 
 
 class InputError(Exception):
@@ -51,8 +44,8 @@ class DatasetInput(Protocol):
         """The estimates of the protocol on these views, in order."""
         ...
 
-    def messages(self, view_ids: set[int]) -> dict[int, ViewMessages]:
-        """The messages of these views (image, and the other inputs a bag holds)."""
+    def views(self, view_ids: set[int]) -> tuple[dict[int, ViewInput], dict[int, str]]:
+        """These views decoded, with the other inputs a bag holds; and why any of them could not be."""
         ...
 
     def summary(self) -> dict[str, Any]:
@@ -68,20 +61,20 @@ class BagInput:
     def __init__(self, path: Path, ground_truth: GroundTruthOptions):
         """Reads the bag's views and ground truth; BagError for an unreadable bag or too few usable views."""
         self.path, self.ground_truth = Path(path), ground_truth
-        self.views: BagViews = read_views(self.path, ground_truth)
-        require_usable(self.views, ground_truth.image_topic)
+        self.bag_views: BagViews = read_views(self.path, ground_truth)
+        require_usable(self.bag_views, ground_truth.image_topic)
         self.name = str(self.path.resolve())
         self.dataset = self.path.resolve().parent.name
 
     def plan(self, protocol: EvaluationProtocol) -> list[EstimateTask]:
-        return plan_tasks(self.views, self.ground_truth, protocol)
+        return plan_bag(self.bag_views, self.ground_truth, protocol)
 
-    def messages(self, view_ids: set[int]) -> dict[int, ViewMessages]:
-        return load_view_messages(self.path, self.ground_truth.image_topic, view_ids, self.views,
-                                  self.ground_truth.inputs)
+    def views(self, view_ids: set[int]) -> tuple[dict[int, ViewInput], dict[int, str]]:
+        return load_views(self.path, self.ground_truth.image_topic, view_ids, self.bag_views, self.ground_truth.inputs)
 
     def summary(self) -> dict[str, Any]:
-        return {"views": len(self.views.views), "usable": len(self.views.pool), "skipped": len(self.views.skipped)}
+        views = self.bag_views
+        return {"views": len(views.views), "usable": len(views.pool), "skipped": len(views.skipped)}
 
 
 def numbered_files(folder: Path, suffix: str) -> dict[int, Path]:
@@ -89,21 +82,16 @@ def numbered_files(folder: Path, suffix: str) -> dict[int, Path]:
     return {int(path.stem): path for path in folder.glob(f"*{suffix}") if path.stem.isdigit()}
 
 
-def png_to_image(path: Path, frame_id: str) -> Image:
-    """An 8-bit PNG (grey, RGB or RGBA) as a ``sensor_msgs/Image`` (mono8, rgb8 or rgba8), via msg_adapters."""
+def read_png_view(path: Path) -> ViewInput:
+    """An 8-bit PNG (grey, RGB or RGBA) as a view: its RGB and, for RGBA, its alpha as the object mask."""
     pixels = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if pixels is None or pixels.dtype != np.uint8:
         raise InputError(f"{path}: not an 8-bit image")
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
-    if channels not in PNG_ENCODINGS:
+    if channels not in PNG_TO_RGB:
         raise InputError(f"{path}: {channels} channels, expected 1, 3 or 4")
-    encoding, conversion = PNG_ENCODINGS[channels]
-    try:
-        message = array_to_image(pixels if conversion is None else cv2.cvtColor(pixels, conversion), encoding)
-    except AdapterError as err:
-        raise InputError(f"{path}: {err}") from None
-    message.header.frame_id = frame_id
-    return message
+    alpha = np.ascontiguousarray(pixels[..., 3]) if channels == 4 else None
+    return ViewInput(cv2.cvtColor(pixels, PNG_TO_RGB[channels]), alpha)
 
 
 class OfficialInput:
@@ -140,8 +128,8 @@ class OfficialInput:
                              f"fewer than any requested view count {sorted(protocol.view_counts)}")
         return tasks
 
-    def messages(self, view_ids: set[int]) -> dict[int, ViewMessages]:
-        return {v: ViewMessages(png_to_image(self.images[v], f"{self.folder.name}/{v:03d}")) for v in view_ids}
+    def views(self, view_ids: set[int]) -> tuple[dict[int, ViewInput], dict[int, str]]:
+        return {v: read_png_view(self.images[v]) for v in view_ids}, {}
 
     def summary(self) -> dict[str, Any]:
         return {"views": len(self.images), "usable": len(set(self.images) & set(self.poses)), "skipped": 0}

@@ -1,4 +1,4 @@
-"""One long job at a time (loading the model, an estimate) on a worker thread, cancellable.
+"""The node's one long job at a time (an estimate) on a thread of its own, cancellable.
 
 Image callbacks and services keep running on the executor while the worker computes; the job
 gets a ``progress(stage, done, total)`` callback and a ``threading.Event`` to stop on.
@@ -38,7 +38,7 @@ class JobProgress:
     percent: float
 
 
-class EstimationWorker:
+class JobRunner:
     """Runs jobs on a daemon thread, one at a time; ``log`` receives a line at every 10 % of a stage."""
 
     def __init__(self, log: Callable[[str], None]) -> None:

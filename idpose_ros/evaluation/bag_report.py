@@ -5,7 +5,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import matplotlib
 
@@ -16,10 +16,8 @@ import numpy as np  # noqa: E402
 from idpose_core.baselines import DEFAULT_FOV_DEG, TITLES  # noqa: E402
 from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
-from idpose_ros.bag_views import ExtraTopics  # noqa: E402
-
-if TYPE_CHECKING:
-    from idpose_ros.evaluate_bag import BagEvaluation
+from idpose_ros.evaluation.bag_evaluation import BagEvaluation  # noqa: E402
+from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 
 RANDOM_METHOD = "random poses"
 COLUMNS = (("rot_acc_15", "RotAcc@15° ↑", True), ("rot_acc_30", "RotAcc@30° ↑", True),
@@ -94,7 +92,7 @@ def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, fl
     return model, {"guesses": guesses, **random}
 
 
-def inputs_used(run: BagEvaluation) -> dict[str, int]:
+def inputs_summary(run: BagEvaluation) -> dict[str, int]:
     """How many estimates took the anchor's polar angle from gravity and its distance from depth, and how many
     views' masks each method made."""
     details = [estimate["details"] for estimate in run.estimates if estimate.get("details")]
@@ -157,7 +155,7 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
     views_by_id = {view.view_id: view for view in views.views}
     report = {
         "bag": str(run.bag), "image_topic": gt.image_topic, "ground_truth": gt.description,
-        "inputs": {**asdict(gt.extras), "used": inputs_used(run)},
+        "inputs": {**asdict(gt.extras), "used": inputs_summary(run)},
         "mode": mode, "model": model,
         "node_parameters": {"solver_preset": preset, **values},
         "protocol": {"samples": protocol.samples, "seed": protocol.seed, "pick_size": len(run.picks[0]),

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from builtin_interfaces.msg import Time
 
 from idpose_core.pipeline import ViewInput
-from idpose_ros.raw_image import RawImage
+from idpose_ros.node.raw_image import RawImage
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ import contextlib
 import threading
 from collections.abc import Callable
 
-from idpose_core.predictor import NoisePredictor
+from idpose_core.noise_predictor import NoisePredictor
 
 
 class ModelUnavailable(RuntimeError):

@@ -11,7 +11,7 @@ from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CompressedImage, Image
 
 from idpose_core.pipeline import ViewInput
-from idpose_ros.view_inputs import decode_image
+from idpose_ros.view_decoding import decode_image
 
 
 @dataclass(frozen=True)
