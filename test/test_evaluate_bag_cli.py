@@ -13,7 +13,7 @@ from idpose_core.evaluation.picks import TooFewViews, usable_view_counts
 from idpose_core.transforms import rigid_transform
 from idpose_ros import evaluate_bag, make_synthetic_bag
 from idpose_ros.dataset.synthetic_bag import write_rgba_image, write_tf
-from idpose_ros.evaluation.bag_io import BagError, BagWriter
+from idpose_ros.evaluation.bag_io import BagWriter
 
 SECOND = 1_000_000_000
 DEMO_BAG = Path(__file__).resolve().parents[1] / "data" / "demo_bags" / "duck"

@@ -114,8 +114,8 @@ def workers_estimating() -> list[int]:
     found = []
     for entry in Path("/proc").iterdir():
         try:
-            if entry.name.isdigit() and (entry / "cmdline").read_bytes().startswith(b"ray::EstimatorWorker.estimate") \
-                    and os.getpid() in ancestors(int(entry.name)):
+            title = (entry / "cmdline").read_bytes() if entry.name.isdigit() else b""
+            if title.startswith(b"ray::RayEstimatorActor.estimate") and os.getpid() in ancestors(int(entry.name)):
                 found.append(int(entry.name))
         except (OSError, ValueError, IndexError):
             continue  # the process ended while being read
