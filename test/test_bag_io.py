@@ -171,6 +171,25 @@ def test_compressed_images_and_undecodable_ones(tmp_path):
     assert rgb.shape == (6, 8, 3) and np.all(rgb[..., 2] == 255) and alpha.sum() == 6 * 255
 
 
+def test_scanning_checks_layouts_and_loading_decodes_each_view_once(tmp_path):
+    """A png whose header is whole but whose pixels are cut off passes the scan (nothing is decoded there) and is
+    reported by load_views, which decodes each requested view once, so that only the estimates holding it fail."""
+    path = tmp_path / "cut"
+    ok, png = cv2.imencode(".png", np.full((16, 16, 3), 90, np.uint8))
+    assert ok
+    with BagWriter(path, "mcap") as bag:
+        write_tf(bag, 0, [("world", "cam", np.eye(4))], static=True)
+        for stamp, data in ((SECOND, png.tobytes()), (2 * SECOND, png.tobytes()[:40])):
+            message = CompressedImage(header=Header(frame_id="cam", stamp=Time(sec=stamp // SECOND)), format="png",
+                                      data=data)
+            bag.write("/img/compressed", "sensor_msgs/msg/CompressedImage", stamp, serialize_message(message))
+    views = read_bag_views(path, "/img/compressed")
+    assert views.pool == [0, 1] and views.skipped == {}
+    decoded, problems = load_views(path, "/img/compressed", {0, 1}, views)
+    assert sorted(decoded) == [0] and decoded[0].rgb.shape == (16, 16, 3)
+    assert list(problems) == [1] and "does not decode" in problems[1]
+
+
 def test_paths_that_are_not_bags(tmp_path):
     with pytest.raises(BagError, match="does not exist"):
         read_bag_views(tmp_path / "nowhere", "/img")
