@@ -27,3 +27,30 @@ def test_ros2_run_finds_the_estimator(workspace):
     assert (share / "package.xml").is_file()
     assert sorted(p.name for p in (share / "config").glob("*.yaml")) == sorted(
         p.name for p in (ROOT / "config").glob("*.yaml"))
+
+
+def test_colcon_sees_both_packages_and_builds_the_interfaces_first(tmp_path, colcon):
+    listing = colcon("list", "--topological-order", "--base-paths", str(ROOT), str(ROOT / "idpose_interfaces"),
+                     cwd=tmp_path)
+    assert [(row.split("\t")[0], row.split("\t")[2]) for row in listing.splitlines()] == [
+        ("idpose_interfaces", "(ros.ament_cmake)"), ("idpose_ros", "(ros.ament_python)")]
+
+
+def test_the_workspace_command_builds_both_packages(workspace):
+    """The command docs/building.md gives, as the workspace fixture ran it; the types come from the workspace."""
+    command = next(line for line in (workspace / "log" / "latest_build" / "logger_all.log").read_text().splitlines()
+                   if "Command line arguments" in line)
+    assert "'--base-paths', 'src', 'src/idpose_ros/idpose_interfaces'" in command
+    documented = (ROOT / "docs" / "building.md").read_text()
+    assert "colcon build --base-paths src src/idpose_ros/idpose_interfaces" in documented
+    script = (
+        f". {workspace / 'install' / 'setup.sh'} && {sys.executable} -c "
+        "'from ament_index_python.packages import get_package_prefix; import idpose_interfaces.msg as m;"
+        "from idpose_interfaces.action import EstimatePoses; EstimatePoses.Goal(images=[]);"
+        "print(get_package_prefix(\"idpose_interfaces\")); print(m.__file__)'"
+    )
+    out = subprocess.run(["bash", "-c", script], capture_output=True, text=True, check=True).stdout.split()
+    prefix = workspace / "install" / "idpose_interfaces"
+    assert Path(out[0]) == prefix and Path(out[1]).is_relative_to(prefix)
+    assert sorted(p.name for p in (prefix / "share" / "idpose_interfaces" / "action").glob("*.action")) == [
+        "EstimatePoses.action"]
