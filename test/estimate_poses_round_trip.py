@@ -47,15 +47,8 @@ def wait(future, what: str):
     return future.result()
 
 
-def main() -> None:
-    rclpy.init()
-    server_node, client_node = rclpy.create_node("round_trip_server"), rclpy.create_node("round_trip_client")
-    ActionServer(server_node, EstimatePoses, "estimate_poses", execute)
-    client = ActionClient(client_node, EstimatePoses, "estimate_poses")
-    executor = MultiThreadedExecutor(num_threads=2)
-    for node in (server_node, client_node):
-        executor.add_node(node)
-    threading.Thread(target=executor.spin, daemon=True).start()
+def send_goal(client: ActionClient) -> dict:
+    """Send a two-image goal and wait for its result; what came back, JSON-ready."""
     assert client.wait_for_server(timeout_sec=30), "no action server"
     images = []
     for k in range(2):
@@ -68,15 +61,35 @@ def main() -> None:
                   "goal response")
     assert handle.accepted, "goal rejected"
     result = wait(handle.get_result_async(), "result").result
-    print(json.dumps({
+    return {
         "feedback": [[f.stage, round(f.progress, 3), f.forward_samples, f.seconds_remaining] for f in feedback],
         "error_code": result.error_code, "run_id": result.run_id, "frame": result.poses.header.frame_id,
         "poses_x": [p.position.x for p in result.poses.poses],
         "views": [[v.header.frame_id, v.confidence, v.ambiguous, v.reliable, math.isnan(v.polar_deg)]
                   for v in result.views],
-    }))
-    executor.shutdown()
-    rclpy.shutdown()
+    }
+
+
+def main() -> None:
+    rclpy.init()
+    server_node, client_node = rclpy.create_node("round_trip_server"), rclpy.create_node("round_trip_client")
+    server = ActionServer(server_node, EstimatePoses, "estimate_poses", execute)
+    client = ActionClient(client_node, EstimatePoses, "estimate_poses")
+    executor = MultiThreadedExecutor(num_threads=2)
+    for node in (server_node, client_node):
+        executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin)
+    spinner.start()
+    try:
+        print(json.dumps(send_goal(client)))
+    finally:  # stop spinning before anything is destroyed, or the process aborts on exit
+        executor.shutdown()
+        spinner.join()
+        client.destroy()
+        server.destroy()
+        for node in (server_node, client_node):
+            node.destroy_node()
+        rclpy.shutdown()
 
 
 if __name__ == "__main__":

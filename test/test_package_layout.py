@@ -1,8 +1,12 @@
-"""The package builds with colcon as ament_python and installs what `ros2 run` needs."""
+"""The repository's two packages build with colcon (ament_python and ament_cmake) and install what `ros2 run`
+needs; the license and changelog agree with their package.xml files."""
 import os
 import subprocess
 import sys
 from pathlib import Path
+
+from catkin_pkg.changelog import get_changelog_from_path
+from catkin_pkg.package import parse_package
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,3 +58,16 @@ def test_the_workspace_command_builds_both_packages(workspace):
     assert Path(out[0]) == prefix and Path(out[1]).is_relative_to(prefix)
     assert sorted(p.name for p in (prefix / "share" / "idpose_interfaces" / "action").glob("*.action")) == [
         "EstimatePoses.action"]
+
+
+def test_the_license_and_the_changelog_agree_with_both_package_xml_files():
+    packages = [parse_package(str(folder / "package.xml")) for folder in (ROOT, ROOT / "idpose_interfaces")]
+    assert {license for package in packages for license in package.licenses} == {"MIT"}
+    assert len({package.version for package in packages}) == 1
+    text = (ROOT / "LICENSE").read_text()
+    assert text.startswith("MIT License") and "idpose_ros developers" in text
+    changelog = get_changelog_from_path(str(ROOT / "CHANGELOG.rst"), "idpose_ros")
+    assert next(version for version, _, _ in changelog.foreach_version()) == packages[0].version
+    text = (ROOT / "CHANGELOG.rst").read_text()
+    forthcoming = text.split("Forthcoming\n-----------\n")[1].split(f"\n{packages[0].version} (")[0]
+    assert "idpose_interfaces" in forthcoming
