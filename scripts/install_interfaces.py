@@ -96,7 +96,7 @@ def clean_environment() -> dict[str, str]:
 def run(command: list[str], env: Mapping[str, str], log: Path) -> None:
     """Run one build step, its output to ``log``; on failure, raise with the log's tail."""
     with log.open("a") as out:
-        out.write(f"$ {' '.join(command)}\n")
+        out.write(f"$ {shlex.join(command)}\n")
         out.flush()
         result = subprocess.run(command, env=env, stdout=out, stderr=subprocess.STDOUT)
     if result.returncode:
@@ -105,14 +105,19 @@ def run(command: list[str], env: Mapping[str, str], log: Path) -> None:
 
 
 def install(package: Path, prefix: Path, build_dir: Path) -> None:
-    """Configure, build and install ``package`` into ``prefix``, then import it in a clean environment."""
-    env = build_environment(prefix)
-    log = build_dir / "build.log"
-    run(["cmake", "-S", str(package), "-B", str(build_dir / "build"), f"-DCMAKE_INSTALL_PREFIX={prefix}",
-         *cmake_arguments(prefix)], env, log)
-    run(["cmake", "--build", str(build_dir / "build"), "--parallel", str(os.cpu_count() or 1)], env, log)
-    run(["cmake", "--install", str(build_dir / "build")], env, log)
-    run([sys.executable, "-c", IMPORT_CHECK], clean_environment(), log)
+    """Configure, build and install ``package`` into ``prefix``, then import it in a clean environment;
+    prints a line as each step starts."""
+    env, build, log = build_environment(prefix), str(build_dir / "build"), build_dir / "build.log"
+    steps = [
+        ("configure", ["cmake", "-S", str(package), "-B", build, f"-DCMAKE_INSTALL_PREFIX={prefix}",
+                       *cmake_arguments(prefix)], env),
+        ("build", ["cmake", "--build", build, "--parallel", str(os.cpu_count() or 1)], env),
+        ("install", ["cmake", "--install", build], env),
+        ("import with nothing set up", [sys.executable, "-c", IMPORT_CHECK], clean_environment()),
+    ]
+    for number, (name, command, step_env) in enumerate(steps, start=1):
+        print(f"install_interfaces: [{number}/{len(steps)}] {name}", flush=True)
+        run(command, step_env, log)
 
 
 def main(argv: list[str] | None = None) -> None:
