@@ -1,4 +1,5 @@
-"""Shared fixtures: DDS isolation for rclpy tests, the colcon workspace and the tiny Zero-1-to-3.
+"""Shared fixtures: DDS isolation for rclpy tests, the colcon workspace, a stand-in tf2_msgs and the tiny
+Zero-1-to-3.
 
 ROS_DOMAIN_ID is drawn at random (1..200) and discovery kept on this host when pytest imports
 this file, before any test calls rclpy.init, so concurrent test runs on the machine never see
@@ -6,6 +7,7 @@ each other's nodes; subprocesses inherit both variables. Torch gets one OpenMP t
 OMP_NUM_THREADS says otherwise (set before torch is imported): on a busy 2-core machine, two
 threads made the tiny model's steps 7-10x slower, worst on threads other than the main one.
 """
+import ctypes
 import os
 import random
 import shutil
@@ -18,22 +20,35 @@ from typing import Any
 
 import pytest
 
+from scripts.install_interfaces import build_environment, cmake_arguments, prepend
+
 os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 200))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 ROOT = Path(__file__).resolve().parents[1]
 COLCON = Path(sys.executable).with_name("colcon")
+# The ROS prefix this environment's ROS wheels installed (a pip-only install's stand-in for /opt/ros/jazzy).
+ROS_PREFIX = Path(sys.prefix)
+# The workspace command that builds this repository's two packages (docs/building.md).
+WORKSPACE_BASE_PATHS = ("src", "src/idpose_ros/idpose_interfaces")
 
 
 def run_colcon(*args: str, cwd: Path) -> str:
-    """Run colcon from this environment in ``cwd``; fails the test with colcon's output on error."""
+    """Run colcon from this environment in ``cwd``, with the build settings a sourced ROS setup gives CMake
+    (ament_cmake packages find the ROS wheels as scripts/install_interfaces.py builds against them);
+    fails the test with colcon's output on error."""
     result = subprocess.run(
         [str(COLCON), *args], cwd=cwd, capture_output=True, text=True, timeout=600,
-        env={**os.environ, "COLCON_LOG_PATH": str(cwd / "log")},
+        env={**build_environment(ROS_PREFIX), "COLCON_LOG_PATH": str(cwd / "log")},
     )
     assert result.returncode == 0, result.stdout + result.stderr
     return result.stdout
+
+
+def colcon_build(ws: Path, *args: str) -> str:
+    """``colcon build *args`` in ``ws``, CMake packages configured against this environment's ROS wheels."""
+    return run_colcon("build", *args, "--cmake-args", *cmake_arguments(ROS_PREFIX), cwd=ws)
 
 
 @pytest.fixture(scope="session")
@@ -44,13 +59,44 @@ def colcon() -> Callable[..., str]:
 
 @pytest.fixture(scope="session")
 def workspace(tmp_path_factory) -> Path:
-    """A colcon workspace with this repository as its only package, built once as a user builds it."""
+    """A colcon workspace with this repository in ``src/idpose_ros``, both its packages (idpose_ros and
+    idpose_interfaces) built once as a user builds them."""
     ws = tmp_path_factory.mktemp("ws")
     src = ws / "src" / "idpose_ros"
     shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".venv", ".git", "build", "install", "log",
                                                              "__pycache__", ".pytest_cache", ".hypothesis"))
-    run_colcon("build", "--packages-select", "idpose_ros", cwd=ws)
+    colcon_build(ws, "--base-paths", *WORKSPACE_BASE_PATHS)
     return ws
+
+
+@pytest.fixture(scope="session")
+def tf2_msgs_prefix(tmp_path_factory) -> Path:
+    """The install prefix of a stand-in ``tf2_msgs`` built with colcon in a temporary workspace, for tests only:
+    PyPI has no tf2_msgs wheel. It holds TFMessage alone, with tf2_msgs' own one-line definition."""
+    ws = tmp_path_factory.mktemp("tf2_msgs_ws")
+    shutil.copytree(ROOT / "test" / "data" / "tf2_msgs", ws / "src" / "tf2_msgs")
+    colcon_build(ws)
+    return ws / "install" / "tf2_msgs"
+
+
+@pytest.fixture
+def tf2_msgs(tf2_msgs_prefix, monkeypatch) -> Path:
+    """The stand-in tf2_msgs importable for one test, in this process and in the subprocesses it starts;
+    yields its install prefix, and forgets the Python module afterwards.
+
+    rosidl's C typesupport opens a message package's typesupport libraries by file name at run time, and
+    the dynamic loader reads LD_LIBRARY_PATH only when a process starts: subprocesses get the library
+    folder there, this process loads the libraries now (a library already loaded is found by its name)."""
+    site = next(tf2_msgs_prefix.glob("lib/python3*/site-packages"))
+    for library in sorted((tf2_msgs_prefix / "lib").glob("*.so")):
+        ctypes.CDLL(str(library))
+    monkeypatch.syspath_prepend(str(site))
+    for name, path in (("PYTHONPATH", site), ("LD_LIBRARY_PATH", tf2_msgs_prefix / "lib"),
+                       ("AMENT_PREFIX_PATH", tf2_msgs_prefix)):
+        monkeypatch.setenv(name, prepend(str(path), os.environ.get(name)))
+    yield tf2_msgs_prefix
+    for module in [name for name in sys.modules if name == "tf2_msgs" or name.startswith("tf2_msgs.")]:
+        del sys.modules[module]
 
 
 @pytest.fixture(scope="session")
