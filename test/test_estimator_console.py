@@ -4,7 +4,7 @@ The node comes up from install/ (after sourcing install/setup.sh), refuses ~/est
 views, starts an estimate on two views, and a Ctrl-C (SIGINT) in the middle of it, while a camera
 streams raw 1080p frames that the node keeps decoding, stops the estimate within 0.5 s and ends the
 process cleanly within 2 s; invalid start-up parameters are FATAL under the node's full name. The
-README's walk-through script, run as written, gets the poses from it. Reduced: the tiny random
+walk-through script of docs/node.md, run as written, gets the poses from it. Reduced: the tiny random
 Zero-1-to-3 on 32 px views, 2 azimuth candidates, probe batch 1, no adjustment steps, 2 refinement
 and 1 runner-up steps per view (endless refinement, 10^6 steps, where the SIGINT must land during
 the run); torch on one thread (test/conftest.py).
@@ -164,20 +164,20 @@ def test_invalid_start_up_parameters_are_fatal_under_the_node_s_full_name(worksp
     assert "[some.robot.idpose_estimator]: invalid parameters:" in fatal and "variant must be one of" in fatal
 
 
-def readme_walk_through_script() -> str:
-    """The Python block of the README's "## Walk-through" section, as a user would copy it."""
-    section = (ROOT / "README.md").read_text().split("\n## Walk-through\n", 1)[1].split("\n## ", 1)[0]
+def walk_through_script() -> str:
+    """The Python block of docs/node.md's "## Walk-through" section, as a user would copy it."""
+    section = (ROOT / "docs" / "node.md").read_text().split("\n## Walk-through\n", 1)[1].split("\n## ", 1)[0]
     (script,) = re.findall(r"```python\n(.*?)```", section, flags=re.DOTALL)
     return script
 
 
-def test_the_readme_walk_through_script_gets_the_poses(workspace, tiny_model_dir, object_views, tmp_path):
+def test_the_walk_through_script_gets_the_poses(workspace, tiny_model_dir, object_views, tmp_path):
     views = tmp_path / "views"
     views.mkdir()
     for index, (rgb, alpha) in enumerate(object_views[:3]):
         cv2.imwrite(str(views / f"{index:02d}.png"), np.dstack([cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), alpha]))
     script = tmp_path / "send_views.py"
-    script.write_text(readme_walk_through_script())
+    script.write_text(walk_through_script())
     log = tmp_path / "estimator.log"
     process = start_estimator(workspace, "/walkthrough", {
         **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request"}, log)
