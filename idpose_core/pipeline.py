@@ -21,7 +21,7 @@ from idpose_core.deroll import upright_view
 from idpose_core.gravity import polar_angle, with_roll
 from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
-from idpose_core.solver import Progress, SolverConfig, SolverResult, estimate_poses
+from idpose_core.solver import Progress, SampleCount, SolverConfig, SolverResult, estimate_poses
 from idpose_core.view_input import ViewInput
 
 __all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_view_poses", "result_details",
@@ -61,9 +61,12 @@ class ViewReport:
 class PipelineResult:
     """``poses`` (N, 4, 4): camera k's real optical frame in the anchor camera's (poses[0] = identity);
     ``anchor_polar_deg`` and ``object_distance`` as used, with where each came from (``polar_source``:
-    "gravity" or "parameter"; ``distance_source``: "depth" or "parameter")."""
+    "gravity" or "parameter"; ``distance_source``: "depth" or "parameter"). ``runner_up_poses`` (N, 4, 4):
+    each view's runner-up (``SolverResult.runner_up_poses``) in the same frame, NaN for the anchor and for
+    views without one."""
 
     poses: np.ndarray
+    runner_up_poses: np.ndarray
     solver_result: SolverResult
     preprocessed: PreprocessedViews
     views: list[ViewReport]
@@ -97,15 +100,28 @@ def view_report(view: ViewInput, mask: np.ndarray, method: str, note: str, roll:
                       polar, distance)
 
 
+def runner_up_poses(solved: SolverResult, polar_deg: float, distance: float, rolls: Sequence[float]) -> np.ndarray:
+    """The runner-ups as real-camera poses (N, 4, 4) in the anchor's frame, like the answers; NaN where none."""
+    runners = np.asarray(solved.runner_up_poses, dtype=np.float64)
+    found = np.isfinite(runners).all(axis=1)
+    starts = np.where(found[:, None], runners, np.asarray(solved.rel_poses, dtype=np.float64))
+    poses = with_roll(anchor_frame_poses(starts, math.radians(polar_deg), distance), np.array(rolls))
+    poses[0] = math.nan
+    poses[1:][~found] = math.nan
+    return poses
+
+
 def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], settings: PipelineSettings,
-                        progress: Progress | None = None, cancel: threading.Event | None = None) -> PipelineResult:
+                        progress: Progress | None = None, cancel: threading.Event | None = None,
+                        samples: SampleCount | None = None) -> PipelineResult:
     """Estimate the poses of N >= 2 views, the first one the anchor.
 
     Gravity (``gravity_up``) de-rolls a view, and when the anchor has it, sets the anchor's polar angle and
     every other view's with it (then searched over azimuth only); the anchor's depth sets the object
     distance. The predictor's ``solver_defaults`` fill the solver settings the caller did not choose.
     Raises ``PreprocessingError``, ``ValueError`` for fewer than 2 views, and ``Cancelled`` when ``cancel``
-    is set (checked between views while preprocessing, then in the solver).
+    is set (checked between views while preprocessing, then in the solver); ``samples`` follows the
+    solver's predictor samples as they are spent.
     """
     if len(views) < 2:
         raise ValueError(f"need at least 2 views, got {len(views)}")
@@ -124,9 +140,10 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     polar_deg = solver.anchor_polar_deg or LEVEL_POLAR_DEG
     distance = anchor.distance or settings.object_distance
     solved = estimate_poses(predictor, preprocessed.images, solver.with_recommended(predictor.solver_defaults),
-                            progress=progress, cancel=cancel, known_polar=known_polar)
+                            progress=progress, cancel=cancel, known_polar=known_polar, samples=samples)
     poses = with_roll(anchor_frame_poses(solved.rel_poses, math.radians(polar_deg), distance), np.array(rolls))
-    return PipelineResult(poses=poses, solver_result=solved, preprocessed=preprocessed, views=reports,
+    return PipelineResult(poses=poses, runner_up_poses=runner_up_poses(solved, polar_deg, distance, rolls),
+                          solver_result=solved, preprocessed=preprocessed, views=reports,
                           anchor_polar_deg=polar_deg,
                           polar_source="gravity" if anchor.polar_deg is not None else "parameter",
                           object_distance=distance, distance_source="depth" if anchor.distance else "parameter")

@@ -1,5 +1,5 @@
-"""ROS messages <-> numpy: images, depth and masks, compressed images, poses, pose arrays, RViz markers, and
-what sensors say about a view (intrinsics, gravity, orientation).
+"""ROS messages <-> numpy: images, depth and masks, compressed images, poses, pose arrays, TF transforms, RViz
+markers, and what sensors say about a view (intrinsics, gravity, orientation).
 
 Imports numpy, OpenCV and the ROS message packages only (no torch, no idpose_core), so the
 node's message handling can be tested and reused without a model.
@@ -16,6 +16,7 @@ from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
 from msg_adapters.markers import camera_markers
 from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_array
 from msg_adapters.sensors import imu_acceleration, orientation_rotation
+from msg_adapters.transforms import pose_array_to_transforms
 from msg_adapters.validation import check_image
 
 __all__ = [
@@ -37,6 +38,7 @@ __all__ = [
     "lookup_encoding",
     "matrix_to_camera_info",
     "matrix_to_pose",
+    "pose_array_to_transforms",
     "orientation_rotation",
     "pose_to_matrix",
     "poses_to_pose_array",

@@ -14,6 +14,8 @@ from idpose_core.spherical import invert
 
 # progress(stage, done, total): samples of the current stage evaluated so far, and its total.
 Progress = Callable[[str, int, int], None]
+# samples(evaluated, differentiated): the predictor samples of the whole estimate so far, after every model call.
+SampleCount = Callable[[int, int], None]
 
 
 class SolverContext:
@@ -26,7 +28,7 @@ class SolverContext:
 
     def __init__(self, predictor: NoisePredictor, views: Views, config: SolverConfig,
                  progress: Progress | None = None, cancel: threading.Event | None = None,
-                 known_polar: torch.Tensor | None = None):
+                 known_polar: torch.Tensor | None = None, samples: SampleCount | None = None):
         self.predictor = predictor
         self.views = views
         self.config = config
@@ -41,6 +43,7 @@ class SolverContext:
         self.probe_noise = self.draw_noise(config.probe_batch)
         self.stage_samples: dict[str, list[int]] = {}  # stage -> [evaluated, differentiated]
         self._progress = progress
+        self._samples = samples
         self._cancel = cancel
         self._stage, self._done, self._total = "", 0, 0
 
@@ -69,6 +72,10 @@ class SolverContext:
     def _advance(self, samples: int) -> None:
         self._done += samples
         self._report()
+
+    def _count_samples(self) -> None:
+        if self._samples is not None:
+            self._samples(self.forward_samples, self.backward_samples)
 
     def _report(self) -> None:
         if self._progress is not None:
@@ -104,6 +111,7 @@ class SolverContext:
             parts.append(self.predictor.noise_error(self.views, ref[chunk].to(self.device), tgt[chunk].to(self.device),
                                                     pose[chunk], t[chunk].to(self.device), noise[chunk]))
             self.stage_samples.setdefault(self._stage, [0, 0])[0] += len(parts[-1])
+            self._count_samples()
             self._advance(len(parts[-1]))
         return torch.cat(parts)
 
@@ -152,4 +160,5 @@ class SolverContext:
             parts.append(errors.detach())
             del errors
         self.stage_samples.setdefault(self._stage, [0, 0])[1] += len(ref)
+        self._count_samples()
         return torch.cat(parts)

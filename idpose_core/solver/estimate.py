@@ -11,7 +11,7 @@ import torch
 from idpose_core.cancellation import checked_in_modules, raise_if_cancelled
 from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.solver.config import SolverConfig
-from idpose_core.solver.context import Progress, SolverContext
+from idpose_core.solver.context import Progress, SampleCount, SolverContext
 from idpose_core.solver.exploration import explore
 from idpose_core.solver.refinement import refine
 from idpose_core.solver.result import SolverResult
@@ -20,6 +20,17 @@ from idpose_core.solver.selection import select
 from idpose_core.spherical import wrap_azimuth
 
 PIXEL_TOLERANCE = 1e-3
+# The stages an estimate reports progress for, in the order they run.
+STAGES = ("exploration", "selection", "refinement", "runner-up", "scoring")
+
+
+def estimate_fraction(stage: str, done: int, total: int) -> float:
+    """How far an estimate is, 0..1, from its current stage's progress: each stage of ``STAGES`` counts equally
+    (their costs depend on the settings), so the figure is monotonic but not proportional to time."""
+    if stage not in STAGES:
+        return 0.0
+    within = done / total if total > 0 else 1.0
+    return (STAGES.index(stage) + min(max(within, 0.0), 1.0)) / len(STAGES)
 
 
 def validated_images(images: torch.Tensor | Sequence[torch.Tensor]) -> torch.Tensor:
@@ -48,15 +59,16 @@ def validated_images(images: torch.Tensor | Sequence[torch.Tensor]) -> torch.Ten
 
 def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[torch.Tensor],
                    config: SolverConfig | None = None, progress: Progress | None = None,
-                   cancel: threading.Event | None = None, known_polar: Sequence[float] | None = None
-                   ) -> SolverResult:
+                   cancel: threading.Event | None = None, known_polar: Sequence[float] | None = None,
+                   samples: SampleCount | None = None) -> SolverResult:
     """Relative poses from view 0 (the anchor) to views 1..N-1 by inverting ``predictor``.
 
     ``images`` (N, 3, H, W) in [-1, 1] (or a sequence of (3, H, W)); ``progress(stage, done, total)``
     is called as samples are evaluated; setting ``cancel`` stops with ``Cancelled`` before the next
     predictor call, or inside one at its next torch module (``checked_in_modules``). ``known_polar``
     (N-1,) are relative polar angles (radians) known from gravity, NaN where unknown: those views search
-    azimuth only (``config.known_polar`` says whether refinement may move them). Bad input raises
+    azimuth only (``config.known_polar`` says whether refinement may move them). ``samples(evaluated,
+    differentiated)`` follows the predictor samples of the estimate as they are spent. Bad input raises
     ``ValueError`` before the predictor is touched. Seeded by ``config.seed``: repeated runs on the
     CPU are identical.
     """
@@ -79,7 +91,7 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
         seconds["encode"] = time.perf_counter() - clock
         if len(views) != len(images):
             raise ValueError(f"predictor encoded {len(views)} views from {len(images)} images")
-        context = SolverContext(predictor, views, config, progress, cancel, known)
+        context = SolverContext(predictor, views, config, progress, cancel, known, samples)
 
         def timed(stage: str, work):
             start = time.perf_counter()
@@ -91,7 +103,8 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
         start = timed("selection", lambda: select(context, candidates))
         poses = timed("refinement", lambda: refine(context, start, config.variant, config.refine_steps_per_view))
         poses[:, 1] = wrap_azimuth(poses[:, 1])
-        scores, runner_poses, runner_scores, ambiguous = timed("scoring", lambda: score(context, poses, candidates))
+        scores, runner_poses, runner_scores, ambiguous, confidence = timed(
+            "scoring", lambda: score(context, poses, candidates))
         runner_poses[:, 1] = wrap_azimuth(runner_poses[:, 1])
     return SolverResult(
         rel_poses=poses.double().numpy(),
@@ -99,6 +112,7 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
         runner_up_poses=runner_poses.double().numpy(),
         runner_up_scores=runner_scores.double().numpy(),
         ambiguous=ambiguous.numpy(),
+        confidence=confidence.double().numpy(),
         forward_samples=context.forward_samples,
         backward_samples=context.backward_samples,
         stage_samples={stage: tuple(counts) for stage, counts in context.stage_samples.items()},

@@ -6,8 +6,10 @@ then polished with ``runner_up_steps`` pairwise refinement steps per view, so th
 bottom of its own basin as the answer does. View i is *ambiguous* when the polished runner-up is
 still far from the answer and ``runner_up_score - score <= ambiguity_margin * (worst_probe - score)``:
 a distinct minimum almost as deep as the answer's, measured against the spread of errors over the
-candidate grid. All errors are taken under the same fixed probe noise, so they compare directly;
-mirror or rotationally symmetric objects give such near-equal far minima.
+candidate grid. The view's *confidence* is that same margin, ``(runner_up_score - score) / spread``
+clipped to [0, 1] (1 when no far minimum survives the polish): ambiguous views are exactly those far
+minima whose confidence is at most ``ambiguity_margin``. All errors are taken under the same fixed probe
+noise, so they compare directly; mirror or rotationally symmetric objects give such near-equal far minima.
 """
 from __future__ import annotations
 
@@ -39,8 +41,9 @@ def runner_up_starts(poses: torch.Tensor, candidates: list[ViewCandidates], limi
 
 
 def score(ctx: SolverContext, poses: torch.Tensor, candidates: list[ViewCandidates]
-          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Scores (N-1,), runner-up poses (N-1, 3), runner-up scores (N-1,) and ambiguity flags (N-1,)."""
+          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Scores (N-1,), runner-up poses (N-1, 3), runner-up scores (N-1,), ambiguity flags (N-1,) and
+    confidences (N-1,) in [0, 1]."""
     config = ctx.config
     limit = math.radians(config.ambiguity_deg)
     starts = runner_up_starts(poses, candidates, limit)
@@ -59,5 +62,8 @@ def score(ctx: SolverContext, poses: torch.Tensor, candidates: list[ViewCandidat
 
     spread = torch.stack([c.pool_errors.max() for c in candidates]) - scores
     still_far = pose_distance(runners, poses) > limit
-    close = runner_scores - scores <= config.ambiguity_margin * spread
-    return scores, runners, runner_scores, found & still_far & close
+    margin = runner_scores - scores
+    close = margin <= config.ambiguity_margin * spread
+    rival = found & still_far
+    confidence = torch.where(rival, (margin / spread.clamp_min(1e-12)).clamp(0.0, 1.0), torch.ones_like(scores))
+    return scores, runners, runner_scores, rival & close, confidence

@@ -14,15 +14,17 @@ RUNNING_STATES = ("estimating", "cancelling")  # a run is still on the worker: n
 
 @dataclass(frozen=True)
 class EstimatorStatus:
-    """What the node reports: ``state`` is idle, estimating, cancelling (a cancelled estimate is stopping) or
-    failed; ``run_id`` numbers the running or the last estimate (0 before the first), as ``~/estimate``
-    answered it; ``model`` as ``ModelHolder.describe``; ``images_received`` counts every image message."""
+    """What the node reports: ``lifecycle`` its lifecycle state; ``state`` is idle, estimating, cancelling (a
+    cancelled estimate is stopping) or failed; ``run_id`` numbers the running or the last estimate (0 before
+    the first), as ``~/estimate`` answered it; ``model`` as ``ModelHolder.describe``; ``images_received``
+    counts every image message."""
 
     state: str
     run_id: int
     views_buffered: int
     max_views: int
     model: str
+    lifecycle: str = "active"
     images_received: int = 0
     stage: str = ""
     progress_percent: float = 0.0
@@ -39,6 +41,8 @@ def level(status: EstimatorStatus) -> bytes:
 
 
 def summary(status: EstimatorStatus) -> str:
+    if status.lifecycle != "active" and status.state != "failed":
+        return f"{status.lifecycle}, {status.views_buffered} views buffered"
     if status.state == "estimating":
         return f"{status.state}: {status.stage} {status.progress_percent:.0f} %"
     if status.state == "failed":
@@ -49,6 +53,7 @@ def summary(status: EstimatorStatus) -> str:
 def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> DiagnosticArray:
     """One DiagnosticStatus with the state, progress, buffer, model, last run and per-view scores."""
     values = {
+        "lifecycle": status.lifecycle,
         "state": status.state,
         "run_id": str(status.run_id),
         "stage": status.stage,

@@ -1,14 +1,16 @@
-"""The estimator's model: loaded once (at start-up on a thread of its own, or on first use), failure remembered.
+"""The estimator's model: loaded once per lifecycle configuration (at configure, or on first use), failure
+remembered, released at cleanup.
 
-An estimate asked for while the start-up load runs simply waits for it; a load that failed is not
-retried (the model parameters are read-only) and its reason is what ~/estimate answers.
+An estimate asked for while a load runs waits for it; a load that failed is not retried until the
+node is cleaned up and configured again (the model parameters are read-only) and its reason is what
+``~/estimate`` and the action answer.
 """
 from __future__ import annotations
 
-import contextlib
 import threading
 from collections.abc import Callable
 
+from idpose_core.memory import release_memory
 from idpose_core.noise_predictor import NoisePredictor
 
 
@@ -17,7 +19,8 @@ class ModelUnavailable(RuntimeError):
 
 
 class ModelHolder:
-    """``get()`` the predictor; ``load`` runs at most once, ``on_failure(reason)`` once if it fails."""
+    """``get()`` the predictor; ``load`` runs at most once until ``release()``, ``on_failure(reason)`` once if
+    it fails."""
 
     def __init__(self, load: Callable[[], NoisePredictor], on_failure: Callable[[str], None]) -> None:
         self._load = load
@@ -56,12 +59,10 @@ class ModelHolder:
                 raise ModelUnavailable(self._problem)
             return self._predictor
 
-    def preload(self) -> None:
-        """Start loading on a daemon thread (failures reach ``on_failure``)."""
-        self._loading = True
-
-        def load() -> None:
-            with contextlib.suppress(ModelUnavailable):  # already reported through on_failure
-                self.get()
-
-        threading.Thread(target=load, name="idpose-model-load", daemon=True).start()
+    def release(self) -> bool:
+        """Drop the predictor (and a remembered failure) and give its memory back; True if one was loaded.
+        Waits for a load that is running."""
+        with self._lock:
+            loaded, self._predictor, self._problem = self._predictor is not None, None, None
+        release_memory()
+        return loaded

@@ -42,7 +42,10 @@ class NodeSettings:
         "or AMX is about twice as fast as float32)",
         choices=("auto", "float32", "float16", "bfloat16"), read_only=True))
     load_model_at_startup: bool = field(default=True, metadata=_spec(
-        "load the model when the node starts (false: on the first estimate)", read_only=True))
+        "load the model at the lifecycle configure transition (false: on the first estimate)", read_only=True))
+    autostart: bool = field(default=True, metadata=_spec(
+        "walk the lifecycle to active (configure, activate) when the node starts; false: wait for a lifecycle "
+        "manager", read_only=True))
     capture_mode: str = field(default="auto", metadata=_spec(
         "auto: keep every image min_view_interval s after the last kept one; on_request: ~/capture keeps "
         "the latest image", choices=("auto", "on_request")))
@@ -67,6 +70,11 @@ class NodeSettings:
         "side in pixels of the preprocessed views the model sees (Zero-1-to-3: 256)", bounds=(16, 1024)))
     anchor_frame: str = field(default="", metadata=_spec(
         "frame_id of the published poses; empty = the anchor image's header.frame_id"))
+    publish_tf: bool = field(default=True, metadata=_spec(
+        "broadcast every estimate on TF: <anchor frame> -> <tf_prefix>view_<k> per view, at the anchor's stamp "
+        "(needs tf2_ros or tf2_msgs; the log says when TF is off)", read_only=True))
+    tf_prefix: str = field(default="idpose_", metadata=_spec(
+        "prefix of the TF child frames of the estimated cameras"))
     diagnostics_period: float = field(default=1.0, metadata=_spec(
         "seconds between two /diagnostics messages", bounds=(0.05, 60.0), read_only=True))
     gravity: str = field(default="auto", metadata=_spec(

@@ -1,0 +1,58 @@
+"""The estimated camera poses on TF: ``<anchor frame> -> <tf_prefix>view_<k>`` for every view of an estimate.
+
+tf2_ros's broadcaster where it is installed (a ROS workspace); else a ``tf2_msgs/TFMessage`` publisher on
+``/tf`` with the same QoS (what that broadcaster is), where tf2_msgs alone is installed; else nothing, said
+once in the log. PyPI has no tf2_ros or tf2_msgs wheel.
+"""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from typing import Any
+
+from geometry_msgs.msg import PoseArray, TransformStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
+
+from msg_adapters import pose_array_to_transforms
+
+TF_TOPIC = "/tf"
+TF_QOS = QoSProfile(depth=100, durability=DurabilityPolicy.VOLATILE)  # tf2_ros.TransformBroadcaster's default
+
+
+def view_frame(prefix: str, index: int) -> str:
+    """The child frame of view ``index`` (0 = the anchor)."""
+    return f"{prefix}view_{index}"
+
+
+def _sender(node: Node) -> tuple[Callable[[list[TransformStamped]], None] | None, str]:
+    """A function that puts transforms on /tf, and what it uses; (None, why) when neither package imports."""
+    try:
+        broadcaster = importlib.import_module("tf2_ros").TransformBroadcaster(node)
+        return broadcaster.sendTransform, "tf2_ros"
+    except ImportError:
+        pass
+    try:
+        message = importlib.import_module("tf2_msgs.msg").TFMessage
+    except ImportError:
+        return None, "neither tf2_ros nor tf2_msgs is installed"
+    publisher = node.create_publisher(message, TF_TOPIC, TF_QOS)
+    return lambda transforms: publisher.publish(message(transforms=transforms)), "tf2_msgs"
+
+
+class PoseBroadcaster:
+    """Broadcasts each estimate's poses on TF; off (with one log line saying why) without tf2."""
+
+    def __init__(self, node: Node, log: Callable[[str], Any]) -> None:
+        self._send, self.backend = _sender(node)
+        if self._send is None:
+            log(f"publish_tf is on but TF is off: {self.backend} (source a ROS 2 installation that has tf2_ros)")
+
+    @property
+    def enabled(self) -> bool:
+        return self._send is not None
+
+    def broadcast(self, poses: PoseArray, prefix: str) -> None:
+        """``poses.header.frame_id -> prefix + view_<k>``, stamped with the poses' (the anchor's) stamp."""
+        if self._send is not None:
+            self._send(pose_array_to_transforms(poses, [view_frame(prefix, k) for k in range(len(poses.poses))]))
