@@ -34,7 +34,7 @@ from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.pipeline import PipelineResult, estimate_view_poses, views_mosaic
 from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_core.solver import Progress
-from idpose_ros.node.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array, result_inputs
+from idpose_ros.node.diagnostics import RUNNING_STATES, EstimatorStatus, border_warning, diagnostic_array, result_inputs
 from idpose_ros.node.input_sync import IMAGE_INPUTS, InputSync
 from idpose_ros.node.job_runner import JobRunner, Outcome
 from idpose_ros.node.model_holder import ModelHolder
@@ -393,6 +393,8 @@ class EstimatorNode(Node):
             self._ambiguous = tuple(bool(a) for a in solved.ambiguous)
             self._inputs = result_inputs(result)
         self._finish(run_id, "idle")
+        if warning := border_warning(result):
+            self.get_logger().warning(warning)
         self.get_logger().info(f"published {len(result.poses)} poses in frame '{frame_id}' "
                                f"after {outcome.seconds:.1f} s ({int(sum(self._ambiguous))} ambiguous)")
 
