@@ -25,7 +25,7 @@ from idpose_core.solver import Progress, SolverConfig, SolverResult, estimate_po
 from idpose_core.view_input import ViewInput
 
 __all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_view_poses", "result_details",
-           "views_mosaic"]
+           "view_crops", "views_mosaic"]
 
 MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
 LEVEL_POLAR_DEG = 90.0  # the anchor's polar angle when nothing tells it: a level camera
@@ -175,9 +175,14 @@ def result_details(result: PipelineResult) -> dict[str, Any]:
             "stage_samples": {stage: list(counts) for stage, counts in solved.stage_samples.items()}}
 
 
-def views_mosaic(images: torch.Tensor) -> np.ndarray:
-    """Preprocessed views (N, 3, S, S) in [-1, 1] -> one RGB image (S, N*S, 3) uint8, side by side."""
+def view_crops(images: torch.Tensor) -> np.ndarray:
+    """Preprocessed views (N, 3, S, S) in [-1, 1] -> the images the model saw, (N, S, S, 3) RGB uint8."""
     if images.ndim != 4 or images.shape[1] != 3:
         raise ValueError(f"expected images (N, 3, S, S), got shape {tuple(images.shape)}")
     pixels = ((images.detach().float().cpu().clamp(-1, 1) + 1) * 127.5).round().to(torch.uint8)
-    return np.ascontiguousarray(torch.cat(list(pixels), dim=2).permute(1, 2, 0).numpy())
+    return np.ascontiguousarray(pixels.permute(0, 2, 3, 1).numpy())
+
+
+def views_mosaic(images: torch.Tensor) -> np.ndarray:
+    """Preprocessed views (N, 3, S, S) in [-1, 1] -> one RGB image (S, N*S, 3) uint8, side by side."""
+    return np.concatenate(list(view_crops(images)), axis=1)

@@ -186,6 +186,7 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         "random_baseline": {"guesses_per_pair": len(run.random_records) // max(len(run.records), 1),
                             "aggregates": random_aggregates},
         **({"baselines": baselines, "intrinsics": intrinsics_note(run)} if baselines else {}),
+        **({"mask_iou": run.mask_iou} if run.mask_iou else {}),
         "failed_estimates": run.failures,
         "seconds": run.seconds,
     }
@@ -202,8 +203,10 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         f"Ground truth: {report['ground_truth']}. {inputs_sentence(gt.extras, report['inputs']['used'])}"
         f"Views on {gt.image_topic}: {len(views.views)}, "
         f"usable {len(views.pool)}, skipped {len(views.skipped)}. "
-        f"Estimates: {len(run.estimates)} scored, {len(run.failures)} failed.\n\n"
-        f"{table}\n\n"
+        f"Estimates: {len(run.estimates)} scored, {len(run.failures)} failed.\n"
+        + (f"Masks against the true masks on {run.mask_iou['true_mask_topic']}: IoU mean {run.mask_iou['mean']:.3f}, "
+           f"worst {run.mask_iou['worst']:.3f} ({run.mask_iou['views']} views).\n" if run.mask_iou else "")
+        + f"\n{table}\n\n"
         "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance. "
         f"{RANDOM_METHOD}: each pair's target camera guessed uniformly on the sphere at the anchor's distance, "
         f"{report['random_baseline']['guesses_per_pair']} guesses per pair (its pairs column counts guesses).\n"
