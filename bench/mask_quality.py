@@ -95,7 +95,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1000, help="scene seed")
     parser.add_argument("--views", type=int, default=8, help="scenes per failure type")
     parser.add_argument("--size", type=int, default=320, help="image side (px)")
-    parser.add_argument("--out", type=Path, default=None, help="JSON file (default bench/results/mask_quality_<seed>.json)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="JSON file (default bench/results/mask_quality_<seed>.json)")
     args = parser.parse_args()
     started = time.monotonic()
     results = measure(args.seed, args.views, args.size)
