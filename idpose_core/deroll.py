@@ -38,6 +38,19 @@ def _warp(image: np.ndarray | None, matrix: np.ndarray, size: tuple[int, int], n
     return warped.astype(bool) if image.dtype == np.bool_ else warped
 
 
+def upright_warp(view: ViewInput, roll: float) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+    """(the turn by ``roll`` about the principal point (3, 3, pixels to pixels), the shift (3, 3) that moves the
+    turned image onto the upright canvas, the canvas (width, height)); the canvas holds the whole turned image."""
+    k = intrinsics_or_default(view)
+    turn = k @ rz(roll) @ np.linalg.inv(k)  # affine: a turn about z keeps the third coordinate
+    height, width = view.rgb.shape[:2]
+    corners = np.array([[0, 0, 1], [width - 1, 0, 1], [0, height - 1, 1], [width - 1, height - 1, 1]], float)
+    moved = corners @ turn.T
+    low, high = np.floor(moved[:, :2].min(axis=0)), np.ceil(moved[:, :2].max(axis=0))
+    shift = np.array([[1.0, 0.0, -low[0]], [0.0, 1.0, -low[1]], [0.0, 0.0, 1.0]])
+    return turn, shift, (int(high[0] - low[0]) + 1, int(high[1] - low[1]) + 1)
+
+
 def upright_view(view: ViewInput) -> tuple[ViewInput, float]:
     """(the view turned upright, its roll in radians); a view without ``gravity_up`` or with a negligible
     roll comes back as it is, with roll 0."""
@@ -46,20 +59,14 @@ def upright_view(view: ViewInput) -> tuple[ViewInput, float]:
     roll = roll_angle(view.gravity_up)
     if abs(roll) < MIN_ROLL:
         return view, roll
-    k = intrinsics_or_default(view)
-    turn = k @ rz(roll) @ np.linalg.inv(k)  # affine: a turn about z keeps the third coordinate
-    height, width = view.rgb.shape[:2]
-    corners = np.array([[0, 0, 1], [width - 1, 0, 1], [0, height - 1, 1], [width - 1, height - 1, 1]], float)
-    moved = corners @ turn.T
-    low, high = np.floor(moved[:, :2].min(axis=0)), np.ceil(moved[:, :2].max(axis=0))
-    shift = np.array([[1.0, 0.0, -low[0]], [0.0, 1.0, -low[1]], [0.0, 0.0, 1.0]])
-    matrix = (shift @ turn)[:2]
-    size = (int(high[0] - low[0]) + 1, int(high[1] - low[1]) + 1)
+    turn, shift, size = upright_warp(view, roll)
+    full = shift @ turn
+    matrix = full[:2]
     depth = None if view.depth is None else np.nan_to_num(view.depth, nan=0.0)
     roi = None
     if view.roi is not None:
         x, y, w, h = view.roi
-        box = np.array([[x, y, 1], [x + w, y, 1], [x, y + h, 1], [x + w, y + h, 1]], float) @ (shift @ turn).T
+        box = np.array([[x, y, 1], [x + w, y, 1], [x, y + h, 1], [x + w, y + h, 1]], float) @ full.T
         (x0, y0), (x1, y1) = np.floor(box[:, :2].min(axis=0)), np.ceil(box[:, :2].max(axis=0))
         roi = (int(x0), int(y0), int(x1 - x0), int(y1 - y0))
     upright = replace(
@@ -68,8 +75,20 @@ def upright_view(view: ViewInput) -> tuple[ViewInput, float]:
         alpha=_warp(view.alpha, matrix, size, True, cv2.BORDER_CONSTANT),
         mask=_warp(view.mask, matrix, size, True, cv2.BORDER_CONSTANT),
         depth=_warp(depth, matrix, size, True, cv2.BORDER_CONSTANT),
-        intrinsics=None if view.intrinsics is None else shift @ k,
+        intrinsics=None if view.intrinsics is None else shift @ intrinsics_or_default(view),
         gravity_up=rz(roll) @ np.asarray(view.gravity_up, dtype=np.float64),
         roi=roi,
     )
     return upright, roll
+
+
+def original_frame_mask(mask: np.ndarray, view: ViewInput, roll: float) -> np.ndarray:
+    """A bool mask on ``view``'s upright canvas (``upright_view``) mapped back to the view's own pixels
+    (H, W); a view used as it is (no gravity, or a negligible roll) keeps its mask."""
+    if view.gravity_up is None or abs(roll) < MIN_ROLL:
+        return mask
+    turn, shift, _ = upright_warp(view, roll)
+    height, width = view.rgb.shape[:2]
+    back = cv2.warpAffine(mask.astype(np.uint8), (shift @ turn)[:2], (width, height),
+                          flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return back.astype(bool)

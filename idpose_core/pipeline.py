@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -17,7 +17,7 @@ import torch
 
 from idpose_core.cameras import anchor_frame_poses
 from idpose_core.depth_segmentation import DepthSegmentationError, object_distance
-from idpose_core.deroll import upright_view
+from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, with_roll
 from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
@@ -25,11 +25,15 @@ from idpose_core.solver import Progress, SampleCount, SolverConfig, SolverResult
 from idpose_core.view_input import ViewInput
 
 __all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_view_poses", "result_details",
-           "views_mosaic"]
+           "view_crops", "views_mosaic"]
 
 MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
 LEVEL_POLAR_DEG = 90.0  # the anchor's polar angle when nothing tells it: a level camera
 ANCHOR_POLAR_RANGE_DEG = (1.0, 179.0)  # the anchor polar angles accepted: straight above or below has no azimuth
+# A mask "touches the border" when it has a pixel within this many pixels of the image's edge (0 = on the
+# outermost row or column): 2 px more allows for a mask boundary that stops a pixel or two short of the edge
+# (anti-aliasing, depth holes along the frame). Such an object is cut off, and the model compares a part.
+BORDER_MARGIN_PX = 2
 
 
 @dataclass(frozen=True)
@@ -48,18 +52,24 @@ class PipelineSettings:
 class ViewReport:
     """What the pipeline read off one view: how its mask was made (``mask_method``, and ``mask_note`` when
     a more trusted source failed), its roll and polar angle from gravity and its object distance from
-    depth (degrees, metres; None without gravity / depth)."""
+    depth (degrees, metres; None without gravity / depth); ``touches_border`` when the mask, in the view's
+    own image, comes within ``BORDER_MARGIN_PX`` of its edge (the object is likely cut off), and
+    ``reliable`` = neither touching the border nor, for a view other than the anchor, ambiguous."""
 
     mask_method: str
     mask_note: str
     roll_deg: float | None
     polar_deg: float | None
     distance: float | None
+    touches_border: bool
+    reliable: bool
 
 
 @dataclass(frozen=True)
 class PipelineResult:
     """``poses`` (N, 4, 4): camera k's real optical frame in the anchor camera's (poses[0] = identity);
+    ``masks`` N bool (H_k, W_k): the object mask preprocessing chose, in view k's own image (the
+    ``preprocessed`` masks are on the upright canvas of a de-rolled view);
     ``anchor_polar_deg`` and ``object_distance`` as used, with where each came from (``polar_source``:
     "gravity" or "parameter"; ``distance_source``: "depth" or "parameter"). ``runner_up_poses`` (N, 4, 4):
     each view's runner-up (``SolverResult.runner_up_poses``) in the same frame, NaN for the anchor and for
@@ -69,6 +79,7 @@ class PipelineResult:
     runner_up_poses: np.ndarray
     solver_result: SolverResult
     preprocessed: PreprocessedViews
+    masks: list[np.ndarray]
     views: list[ViewReport]
     anchor_polar_deg: float
     polar_source: str
@@ -86,8 +97,17 @@ def viewing_ray(view: ViewInput, mask: np.ndarray) -> np.ndarray:
     return np.linalg.solve(np.asarray(view.intrinsics, dtype=np.float64), pixel)
 
 
-def view_report(view: ViewInput, mask: np.ndarray, method: str, note: str, roll: float) -> ViewReport:
-    """The view's roll, gravity polar angle and depth distance, where its inputs give them."""
+def touches_border(mask: np.ndarray, margin: int = BORDER_MARGIN_PX) -> bool:
+    """Whether the bool mask (H, W) has a pixel within ``margin`` px of the image's edge."""
+    band = margin + 1
+    return bool(mask[:band].any() or mask[-band:].any() or mask[:, :band].any() or mask[:, -band:].any())
+
+
+def view_report(view: ViewInput, mask: np.ndarray, method: str, note: str, roll: float,
+                original_mask: np.ndarray) -> ViewReport:
+    """The view's roll, gravity polar angle and depth distance, where its inputs give them, and whether its
+    mask in the original image (``original_mask``) touches the border; ``reliable`` does not know the
+    solver's ambiguity yet (``with_ambiguity`` adds it)."""
     gravity = view.gravity_up is not None
     distance, depth_note = None, ""
     if view.depth is not None:
@@ -96,8 +116,16 @@ def view_report(view: ViewInput, mask: np.ndarray, method: str, note: str, roll:
         except DepthSegmentationError as err:
             depth_note = f"no depth distance: {err}"
     polar = math.degrees(polar_angle(view.gravity_up, viewing_ray(view, mask))) if gravity else None
+    border = touches_border(original_mask)
     return ViewReport(method, "; ".join(filter(None, [note, depth_note])), math.degrees(roll) if gravity else None,
-                      polar, distance)
+                      polar, distance, touches_border=border, reliable=not border)
+
+
+def with_ambiguity(reports: Sequence[ViewReport], ambiguous: np.ndarray) -> list[ViewReport]:
+    """The reports with ``reliable`` also false for the non-anchor views the solver found ambiguous
+    (``ambiguous`` (N-1,), one per view after the anchor)."""
+    flags = [False, *(bool(a) for a in ambiguous)]
+    return [replace(report, reliable=report.reliable and not flag) for report, flag in zip(reports, flags)]
 
 
 def runner_up_poses(solved: SolverResult, polar_deg: float, distance: float, rolls: Sequence[float]) -> np.ndarray:
@@ -127,8 +155,9 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
         raise ValueError(f"need at least 2 views, got {len(views)}")
     upright, rolls = zip(*(upright_view(view) for view in views))
     preprocessed = preprocess_views(upright, size=settings.image_size, cancel=cancel)
-    reports = [view_report(view, mask, method, note, roll) for view, mask, method, note, roll in
-               zip(upright, preprocessed.masks, preprocessed.mask_methods, preprocessed.mask_notes, rolls)]
+    masks = [original_frame_mask(mask, view, roll) for mask, view, roll in zip(preprocessed.masks, views, rolls)]
+    reports = [view_report(view, mask, method, note, roll, original) for view, mask, method, note, roll, original in
+               zip(upright, preprocessed.masks, preprocessed.mask_methods, preprocessed.mask_notes, rolls, masks)]
     anchor = reports[0]
     solver = settings.solver
     known_polar = None
@@ -143,7 +172,8 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
                             progress=progress, cancel=cancel, known_polar=known_polar, samples=samples)
     poses = with_roll(anchor_frame_poses(solved.rel_poses, math.radians(polar_deg), distance), np.array(rolls))
     return PipelineResult(poses=poses, runner_up_poses=runner_up_poses(solved, polar_deg, distance, rolls),
-                          solver_result=solved, preprocessed=preprocessed, views=reports,
+                          solver_result=solved, preprocessed=preprocessed, masks=masks,
+                          views=with_ambiguity(reports, solved.ambiguous),
                           anchor_polar_deg=polar_deg,
                           polar_source="gravity" if anchor.polar_deg is not None else "parameter",
                           object_distance=distance, distance_source="depth" if anchor.distance else "parameter")
@@ -151,8 +181,9 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
 
 def result_details(result: PipelineResult) -> dict[str, Any]:
     """What an estimate read off its views, JSON-ready: per view the mask method (and note), gravity's roll and
-    polar angle and the depth distance; where the anchor's polar angle and distance came from; the
-    predictor samples it took (evaluated, differentiated, and both per solver stage)."""
+    polar angle, the depth distance, whether the mask touches the border and whether the pose is reliable;
+    where the anchor's polar angle and distance came from; the predictor samples it took (evaluated,
+    differentiated, and both per solver stage)."""
     solved = result.solver_result
     return {"views": [asdict(view) for view in result.views], "anchor_polar_deg": result.anchor_polar_deg,
             "polar_source": result.polar_source, "object_distance": result.object_distance,
@@ -161,9 +192,14 @@ def result_details(result: PipelineResult) -> dict[str, Any]:
             "stage_samples": {stage: list(counts) for stage, counts in solved.stage_samples.items()}}
 
 
-def views_mosaic(images: torch.Tensor) -> np.ndarray:
-    """Preprocessed views (N, 3, S, S) in [-1, 1] -> one RGB image (S, N*S, 3) uint8, side by side."""
+def view_crops(images: torch.Tensor) -> np.ndarray:
+    """Preprocessed views (N, 3, S, S) in [-1, 1] -> the images the model saw, (N, S, S, 3) RGB uint8."""
     if images.ndim != 4 or images.shape[1] != 3:
         raise ValueError(f"expected images (N, 3, S, S), got shape {tuple(images.shape)}")
     pixels = ((images.detach().float().cpu().clamp(-1, 1) + 1) * 127.5).round().to(torch.uint8)
-    return np.ascontiguousarray(torch.cat(list(pixels), dim=2).permute(1, 2, 0).numpy())
+    return np.ascontiguousarray(pixels.permute(0, 2, 3, 1).numpy())
+
+
+def views_mosaic(images: torch.Tensor) -> np.ndarray:
+    """Preprocessed views (N, 3, S, S) in [-1, 1] -> one RGB image (S, N*S, 3) uint8, side by side."""
+    return np.concatenate(list(view_crops(images)), axis=1)

@@ -182,6 +182,12 @@ def bounding_box(mask: np.ndarray) -> tuple[int, int, int, int]:
     return cv2.boundingRect(mask.astype(np.uint8))
 
 
+def mask_iou(mask: np.ndarray, truth: np.ndarray) -> float:
+    """Intersection over union of two bool masks of one shape (1.0 when both are empty)."""
+    union = np.logical_or(mask, truth).sum()
+    return float(np.logical_and(mask, truth).sum() / union) if union else 1.0
+
+
 def square_window(mask: np.ndarray, side: int) -> tuple[int, int, int]:
     """(x, y, side) of the square of ``side`` px centred on the mask's bounding box."""
     x, y, width, height = bounding_box(mask)

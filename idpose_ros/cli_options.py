@@ -62,6 +62,9 @@ def add_ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
                             "matched by stamp; default: /tf + /tf_static")
     group.add_argument("--gt-tolerance", type=float, default=gt.gt_tolerance,
                        help=f"stamp tolerance for --gt-topic (s, default {gt.gt_tolerance:g})")
+    group.add_argument("--true-mask-topic", default=gt.true_mask_topic,
+                       help="the target's true masks (mono8), when the bag has them: offline, the report gives each "
+                            f"view's mask IoU against them (default {gt.true_mask_topic})")
     group.add_argument("--object-center", type=float, nargs=3, default=gt.object_center, metavar=("X", "Y", "Z"),
                        help="object centre in the world frame (default origin)")
     group.add_argument("--up", type=float, nargs=3, default=gt.up, metavar=("X", "Y", "Z"),
@@ -98,7 +101,7 @@ def ground_truth_options(args: argparse.Namespace) -> GroundTruthOptions:
                          tuple(args.imu_to_optical) if args.imu_to_optical else None, args.input_tolerance,
                          args.imu_window)
     return GroundTruthOptions(args.image_topic, args.world_frame, args.gt_topic, args.gt_tolerance,
-                              tuple(args.object_center), tuple(args.up), extras)
+                              tuple(args.object_center), tuple(args.up), extras, args.true_mask_topic)
 
 
 def add_protocol_arguments(parser: argparse.ArgumentParser, samples_help: str = "random picks of 8 views") -> None:

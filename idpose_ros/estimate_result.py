@@ -54,7 +54,7 @@ def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[Vi
             roll_deg=_nan_if_none(view.roll_deg), polar_deg=_nan_if_none(view.polar_deg),
             mask_method=view.mask_method, mask_note=view.mask_note,
             polar_source="gravity" if view.polar_deg is not None else "",
-            object_distance=_nan_if_none(view.distance), touches_border=False, reliable=not ambiguous[k]))
+            object_distance=_nan_if_none(view.distance), touches_border=view.touches_border, reliable=view.reliable))
     return estimates
 
 
@@ -79,7 +79,8 @@ def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
     """What ``idpose_core.pipeline.result_details`` gives for the same estimate (its angles and distances
     rounded to the message's float32)."""
     views = [ViewReport(view.mask_method, view.mask_note, _none_if_nan(view.roll_deg), _none_if_nan(view.polar_deg),
-                        _none_if_nan(view.object_distance)) for view in result.views]
+                        _none_if_nan(view.object_distance), touches_border=view.touches_border,
+                        reliable=view.reliable) for view in result.views]
     return {"views": [asdict(view) for view in views], "anchor_polar_deg": result.anchor_polar_deg,
             "polar_source": result.anchor_polar_source, "object_distance": result.object_distance,
             "distance_source": result.distance_source, "forward_samples": result.forward_samples,

@@ -6,7 +6,9 @@ PoseStamped ``--gt-topic``. Seeded picks of 8 views are evaluated on their first
 views, the first view being the anchor, either in-process (``--mode offline``) or by replaying the
 views to the estimator node over ROS (``--mode replay``). Writes report.json, report.md and
 cameras_<sample>.png into ``--out``. With ``--baselines colmap features`` the classical baselines run
-on the same views of every estimate and get their own rows.
+on the same views of every estimate and get their own rows. Offline, ``--save-views DIR`` writes each
+used view's mask and the crop the model saw into DIR/views, and a bag with true target masks gets
+each view's mask IoU in the report.
 
 A thin front end: the protocol is ``idpose_core.evaluation``, the bag adapter
 ``idpose_ros.evaluation.bag_evaluation``, the report ``idpose_ros.evaluation.bag_report``.
@@ -35,12 +37,16 @@ from idpose_ros.evaluation.bag_report import write_report
 from idpose_ros.evaluation.estimators import make_estimator
 from idpose_ros.evaluation.ground_truth import read_views, require_usable, skipped_note
 from idpose_ros.evaluation.replay import ReplayError
+from idpose_ros.evaluation.view_masks import check_save_views
 
 
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationProtocol]:
     parser = argparse.ArgumentParser(prog="evaluate_bag", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
     parser.add_argument("bag", type=Path, help="rosbag2 bag: a folder with metadata.yaml, or a .mcap/.db3 file")
     parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
+    parser.add_argument("--save-views", type=Path, default=None, metavar="DIR",
+                        help="offline: write DIR/views/<view id>_mask.png (the mask in the original image) and "
+                             "<view id>_crop.png (what the model saw) for every view an estimate used")
     add_protocol_arguments(parser)
     add_baseline_arguments(parser)
     add_ground_truth_arguments(parser)
@@ -55,6 +61,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         options, ground_truth = estimator_options(args), ground_truth_options(args)
         options.node_values()  # bad solver options, then a bad bag, fail before a model is loaded
+        if args.save_views is not None:
+            check_save_views(options.mode)
         views = read_views(args.bag, ground_truth)
         if skipped_note(views):
             print(f"evaluate_bag: {skipped_note(views)}", file=sys.stderr)
@@ -64,7 +72,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"evaluate_bag: {len(views.pool)} usable views: evaluating sets of {', '.join(map(str, counts))} "
                   "views only", file=sys.stderr)
         estimator = make_estimator(options)
-        evaluation = evaluate_bag(args.bag, estimator, ground_truth, protocol, views, baselines=args.baselines)
+        evaluation = evaluate_bag(args.bag, estimator, ground_truth, protocol, views, baselines=args.baselines,
+                                  save_views=args.save_views)
     except (BagError, ModelLoadError, ReplayError, TooFewViews, ValueError) as err:
         print(f"evaluate_bag: error: {err}", file=sys.stderr)
         return 2
@@ -74,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
     table = write_report(args.out, evaluation)
     print(table)
     print(f"report: {args.out / 'report.md'}, {args.out / 'report.json'}")
+    if args.save_views is not None:
+        print(f"views: {args.save_views / 'views'}")
     if evaluation.failures:
         total = len(evaluation.failures) + len(evaluation.estimates)
         print(f"evaluate_bag: {len(evaluation.failures)} of {total} estimates failed (listed in the report)",

@@ -1,8 +1,13 @@
 """The estimator's /diagnostics message: state, level, progress, buffer, model and per-view scores."""
+import numpy as np
+import torch
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from idpose_ros.node.diagnostics import STATUS_NAME, EstimatorStatus, diagnostic_array
+from idpose_core.pipeline import PipelineResult, ViewReport
+from idpose_core.preprocessing import PreprocessedViews
+from idpose_core.solver import SolverResult
+from idpose_ros.node.diagnostics import STATUS_NAME, EstimatorStatus, border_warning, diagnostic_array, result_inputs
 
 
 def values(status: EstimatorStatus) -> tuple[DiagnosticStatus, dict[str, str]]:
@@ -46,3 +51,27 @@ def test_failures_are_errors():
                                           model="unavailable: no model available: /x does not exist",
                                           last_error="no model available: /x does not exist"))
     assert no_model.level == DiagnosticStatus.ERROR and kv["model"].startswith("unavailable: ")
+
+
+def three_view_result(touching: tuple[bool, bool, bool], ambiguous: tuple[bool, bool]) -> PipelineResult:
+    """A three-view result whose views' masks touch the border as ``touching`` says."""
+    flags = (False, *ambiguous)
+    reports = [ViewReport("depth", "", None, None, 0.5, touches_border=t, reliable=not (t or a))
+               for t, a in zip(touching, flags)]
+    masks = [np.ones((8, 8), dtype=bool)] * 3
+    solved = SolverResult(np.zeros((2, 3)), np.zeros(2), np.full((2, 3), np.nan), np.full(2, np.nan),
+                          np.array(ambiguous), np.ones(2), 0, 0)
+    return PipelineResult(np.tile(np.eye(4), (3, 1, 1)), np.full((3, 4, 4), np.nan), solved,
+                          PreprocessedViews(torch.zeros(3, 3, 4, 4), masks, ["depth"] * 3, [""] * 3, [(0, 0, 8)] * 3),
+                          masks, reports, 90.0, "parameter", 0.5, "depth")
+
+
+def test_the_border_flag_and_reliability_are_diagnostic_values_and_name_the_view_in_a_warning():
+    result = three_view_result((False, False, True), (True, False))
+    kv = result_inputs(result)
+    assert [kv[f"view_{k}_touches_border"] for k in range(3)] == ["false", "false", "true"]
+    assert [kv[f"view_{k}_reliable"] for k in range(3)] == ["true", "false", "false"]
+    warning = border_warning(result)
+    assert "view 2" in warning and "border" in warning and "view 1" not in warning
+    assert border_warning(three_view_result((False, False, False), (True, True))) is None
+    assert "view 0 (the anchor" in border_warning(three_view_result((True, False, False), (False, False)))

@@ -22,7 +22,7 @@ from idpose_ros import evaluate_bag
 from idpose_ros.dataset.synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, SyntheticBagOptions, make_bag
 from idpose_ros.evaluation import bag_evaluation, estimators
 from idpose_ros.evaluation.bag_io import TYPESTORE, BagWriter
-from idpose_ros.evaluation.bag_report import write_report
+from idpose_ros.evaluation.bag_report import border_views, write_report
 from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 from idpose_ros.node import estimator_node
@@ -111,8 +111,12 @@ def test_report_files(tmp_path, oracle_run):
     assert report["views"] == {"total": VIEWS, "usable": VIEWS, "skipped": []}
     assert {"sample", "n", "anchor_view", "view", "pred_rel_sph", "true_rel_sph", "rot_err_deg", "pos_err",
             "score", "ambiguous", "seconds"} <= set(report["pairs"][0])
+    used = report["inputs"]["used"]
+    assert (used["estimates_touching_border"], used["views_touching_border"]) == (0, 0)  # centred renders
+    assert used["unreliable_views"] == sum(pair["ambiguous"] for pair in report["pairs"])
+    assert all(estimate["views_touching_border"] == [] for estimate in report["estimates"])
     markdown = (out / "report.md").read_text()
-    assert table in markdown
+    assert table in markdown and "0 had a view whose object mask touches the image border" in markdown
     assert "| ID-Pose (full) | 8 | 100.0 | 100.0 | 100.0 |" in table
     assert "| ID-Pose (full) | all | 100.0 | 100.0 | 100.0 |" in table
     assert "| random poses | all |" in table and report["random_baseline"]["guesses_per_pair"] == 200
@@ -120,6 +124,12 @@ def test_report_files(tmp_path, oracle_run):
     for sample in (0, 1):
         image = cv2.imread(str(out / f"cameras_{sample}.png"))
         assert image is not None and image.shape[0] > 100
+
+
+def test_an_estimate_names_its_views_whose_masks_touch_the_border():
+    views = [{"touches_border": flag} for flag in (False, True, True)]
+    assert border_views({"views": [4, 7, 9], "details": {"views": views}}) == [7, 9]
+    assert border_views({"views": [4, 7], "details": {}}) is None  # replay mode: the node reports no masks
 
 
 def test_node_values_follow_the_node_parameters():

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from idpose_core.deroll import upright_view
+from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, roll_angle, rz, up_from_acceleration, up_from_orientation, with_roll
 from idpose_core.synthetic.robot_views import LINK_FROM_OPTICAL, pinhole_intrinsics
 from idpose_core.synthetic.scenes import FOV_DEG, SceneRenderer, demo_objects, rolled_optical_frames
@@ -70,3 +70,21 @@ def test_views_without_gravity_or_roll_stay_as_they_are():
     level = ViewInput(np.zeros((16, 16, 3), np.uint8), gravity_up=np.array([0.0, -1.0, 0.0]))
     turned, roll = upright_view(level)
     assert turned is level and roll == 0.0
+
+
+def test_a_mask_on_the_upright_canvas_maps_back_to_the_original_pixels():
+    """An object cut by the left edge of a rolled view: on the upright canvas the edge is a tilted line inside
+    the canvas, and mapping the canvas mask back gives the original mask, edge and all."""
+    size = 96
+    mask = np.zeros((size, size), dtype=bool)
+    mask[30:60, 0:20] = True
+    frame = rolled_optical_frames(SPHERES[:1], np.radians([35.0]))[0]
+    view = ViewInput(np.zeros((size, size, 3), np.uint8), mask=mask, intrinsics=pinhole_intrinsics(size, FOV_DEG),
+                     gravity_up=up_from_orientation(frame[:3, :3]))
+    turned, roll = upright_view(view)
+    assert turned.mask.shape != mask.shape and not turned.mask[:, :3].any()
+    back = original_frame_mask(turned.mask, view, roll)
+    assert back.shape == mask.shape
+    assert (back & mask).sum() / (back | mask).sum() > 0.9 and back[:, 0].any()
+    level = ViewInput(view.rgb, mask=mask)
+    assert original_frame_mask(mask, level, 0.0) is mask

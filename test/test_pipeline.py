@@ -12,7 +12,15 @@ import pytest
 import torch
 
 from idpose_core.cameras import opengl_to_optical, spherical_to_c2w
-from idpose_core.pipeline import PipelineSettings, ViewInput, estimate_view_poses, views_mosaic
+from idpose_core.pipeline import (
+    BORDER_MARGIN_PX,
+    PipelineSettings,
+    ViewInput,
+    estimate_view_poses,
+    result_details,
+    touches_border,
+    views_mosaic,
+)
 from idpose_core.preprocessing import PreprocessingError
 from idpose_core.solver import Cancelled, SolverConfig
 from idpose_core.synthetic.render_oracle import RenderOracle
@@ -97,6 +105,36 @@ def test_bad_view_sets_are_refused_with_the_problem_named(scene):
     empty = ViewInput(views[1].rgb, np.zeros_like(views[1].alpha))
     with pytest.raises(PreprocessingError, match="view 1"):
         estimate_view_poses(oracle, [views[0], empty, views[2]], settings)
+
+
+def shifted_left(view: ViewInput, pixels: int) -> ViewInput:
+    """The view with its picture moved ``pixels`` to the left, white (and transparent) coming in on the right."""
+    rgb, alpha = np.full_like(view.rgb, 255), np.zeros_like(view.alpha)
+    rgb[:, :-pixels], alpha[:, :-pixels] = view.rgb[:, pixels:], view.alpha[:, pixels:]
+    return ViewInput(rgb, alpha)
+
+
+def test_a_view_cut_by_the_border_is_flagged_unreliable_and_a_centred_one_is_not(scene):
+    _, oracle, views, settings = scene
+    cols = np.flatnonzero(views[1].alpha.any(axis=0))
+    cut = shifted_left(views[1], int(cols[0] + (cols[-1] - cols[0]) // 3))  # a third of the object off the frame
+    result = estimate_view_poses(oracle, [views[0], cut, views[2]], settings)
+    flags = [(view.touches_border, view.reliable) for view in result.views]
+    assert flags[0] == (False, True) and flags[1] == (True, False)
+    assert flags[2] == (False, not result.solver_result.ambiguous[1])
+    assert [view["touches_border"] for view in result_details(result)["views"]] == [False, True, False]
+    assert [mask.shape for mask in result.masks] == [view.rgb.shape[:2] for view in views]
+
+
+def test_touching_the_border_allows_the_documented_margin():
+    mask = np.zeros((40, 60), dtype=bool)
+    mask[10:20, 20:30] = True
+    assert not touches_border(mask)
+    mask[25, BORDER_MARGIN_PX] = True  # within the margin of the left edge
+    assert touches_border(mask)
+    mask[25, BORDER_MARGIN_PX] = False
+    mask[25, 59 - BORDER_MARGIN_PX - 1] = True  # one pixel further in from the right edge: clear of it
+    assert not touches_border(mask)
 
 
 def test_views_mosaic_puts_the_views_side_by_side_as_rgb8():

@@ -18,7 +18,9 @@ class ViewSetEstimate:
     ``poses`` (n, 4, 4) optical camera poses in the anchor camera's frame (poses[0] = identity);
     ``scores`` and ``ambiguous`` (n-1,) per non-anchor view; ``seconds`` the wall time of the estimate;
     ``details`` what the estimate read off its views (JSON-ready: how masks were made, gravity's polar
-    angles and rolls, the depth distance, where the anchor's polar angle and distance came from).
+    angles and rolls, the depth distance, where the anchor's polar angle and distance came from). An estimator
+    that runs the pipeline in this process also gives ``masks``, n bool (H_k, W_k) object masks in each view's
+    own image, and ``crops`` (n, S, S, 3) uint8, the preprocessed images the model saw (empty otherwise).
     """
 
     poses: np.ndarray
@@ -26,6 +28,8 @@ class ViewSetEstimate:
     ambiguous: np.ndarray
     seconds: float
     details: dict[str, Any] = field(default_factory=dict)
+    masks: tuple[np.ndarray, ...] = ()
+    crops: np.ndarray | None = None
 
 
 class ViewSetEstimator(Protocol):

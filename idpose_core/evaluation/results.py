@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -75,8 +75,10 @@ class Evaluation:
 
 def evaluate_tasks(evaluation: Evaluation, estimator: ViewSetEstimator, tasks: Sequence[EstimateTask],
                    views: Mapping[int, ViewInput], unusable: Mapping[int, str] | None = None,
-                   show_progress: bool = True, name: str = "evaluate") -> Evaluation:
-    """Run every task on its views (decoded once, shared by ID-Pose and the baselines), with a progress bar.
+                   show_progress: bool = True, name: str = "evaluate",
+                   on_estimate: Callable[[EstimateTask, EstimateOutcome], None] | None = None) -> Evaluation:
+    """Run every task on its views (decoded once, shared by ID-Pose and the baselines), with a progress bar;
+    ``on_estimate`` sees each estimate's outcome as it comes (for what the evaluation itself does not keep).
 
     An estimate whose views cannot be prepared (``PreprocessingError``: no plausible object in one of them)
     or that holds a view in ``unusable`` (view id -> why it could not be decoded) is recorded in
@@ -97,8 +99,11 @@ def evaluate_tasks(evaluation: Evaluation, estimator: ViewSetEstimator, tasks: S
             try:
                 if broken:
                     raise PreprocessingError("; ".join(broken))
-                evaluation.add(task, run_estimate(estimator, task, [views[v] for v in task.views], progress,
-                                                  evaluation.baselines))
+                outcome = run_estimate(estimator, task, [views[v] for v in task.views], progress,
+                                       evaluation.baselines)
+                evaluation.add(task, outcome)
+                if on_estimate is not None:
+                    on_estimate(task, outcome)
             except PreprocessingError as err:  # one implausible view costs its estimate, not the run
                 evaluation.fail(task, err)
                 bar.write(f"{name}: {label}: not estimated: {err}", file=sys.stderr)

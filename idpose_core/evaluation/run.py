@@ -12,7 +12,7 @@ import numpy as np
 from idpose_core.baselines import BASELINES, run_baseline
 from idpose_core.baselines.scoring import score_baseline
 from idpose_core.cameras import c2w_to_spherical
-from idpose_core.evaluation.estimator import ViewSetEstimator
+from idpose_core.evaluation.estimator import ViewSetEstimate, ViewSetEstimator
 from idpose_core.evaluation.object_frame import world_cameras
 from idpose_core.evaluation.protocol import EstimateTask
 from idpose_core.evaluation.scoring import random_baseline, score_poses
@@ -24,14 +24,15 @@ from idpose_core.view_input import ViewInput
 @dataclass(frozen=True)
 class EstimateOutcome:
     """What one estimate adds to the evaluation: pair records, random-baseline records, the estimate's row,
-    the predicted cameras (n, 4, 4), the anchor's true one first, and per classical baseline its (pair
-    records, row) on the same views."""
+    the predicted cameras (n, 4, 4), the anchor's true one first, per classical baseline its (pair
+    records, row) on the same views, and the estimator's answer itself (its masks and crops, when it has them)."""
 
     records: list[dict[str, Any]]
     random_records: list[dict[str, Any]]
     row: dict[str, Any]
     predicted_c2w: np.ndarray
     baselines: dict[str, tuple[list[dict[str, Any]], dict[str, Any]]] = field(default_factory=dict)
+    estimate: ViewSetEstimate | None = None
 
 
 def check_baselines(names: Sequence[str]) -> None:
@@ -64,7 +65,7 @@ def run_estimate(estimator: ViewSetEstimator, task: EstimateTask, views: Sequenc
            "anchor_polar_deg": anchor_polar_deg, "object_distance": distance, "details": estimate.details}
     predicted = world_cameras(estimate.poses, true_c2w[0])
     return EstimateOutcome(records, random_baseline(true_c2w, task.baseline_seed), row, predicted,
-                           {name: classical_baseline(name, task, views) for name in baselines})
+                           {name: classical_baseline(name, task, views) for name in baselines}, estimate)
 
 
 def classical_baseline(name: str, task: EstimateTask, views: Sequence[ViewInput]

@@ -3,7 +3,10 @@
 Metric units. The world origin is the target's centre (its bounding-box centre, as for the white-
 background scenes), world up +z; the table top lies under the target, the room's floor 0.75 m below
 it and four textured walls around. Distractors stand on the table around the target, one of them
-close behind it as seen from the first camera. A render gives the colour image (no alpha), the depth
+close behind it as seen from the first camera. ``challenge`` layouts stage what makes depth segmentation
+hard: a target with a part standing out towards the camera, a box touching the target, a backdrop panel
+10-30 cm behind it (``challenge_camera`` also aims a camera off the target, to cut it at the border).
+A render gives the colour image (no alpha), the depth
 along the optical axis in metres, and the target's true mask.
 """
 from __future__ import annotations
@@ -33,6 +36,8 @@ WALL_HEIGHT = 2.5  # m
 TABLE_TEXTURES = ("table/table.png", "checker_grid.jpg", "tray/tray.jpg", "domino/domino.jpg")
 WALL_TEXTURES = ("tex256.png", "uvmap.png", "checker_blue.png", "jenga/jenga.png", "cube.png")
 DISTRACTOR_TEXTURES = ("jenga/jenga.png", "domino/domino.jpg", "checker_blue.png", "uvmap.png")
+CHALLENGES = ("clutter", "parts", "touching", "backdrop", "off_centre")
+BACKDROP_GAP = (0.10, 0.30)  # m from the target's bounding ball to the backdrop panel
 _COLOURS = ((0.85, 0.3, 0.2, 1.0), (0.2, 0.5, 0.85, 1.0), (0.3, 0.7, 0.3, 1.0), (0.9, 0.8, 0.2, 1.0),
             (0.6, 0.3, 0.7, 1.0), (0.2, 0.75, 0.8, 1.0))
 
@@ -91,16 +96,60 @@ def _distractor_pool(rng: np.random.Generator, count: int) -> list[ObjectSpec]:
     return specs
 
 
-def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: float) -> TabletopLayout:
+def parts_target(rng: np.random.Generator) -> ObjectSpec:
+    """A body with a head standing out in front of it (towards +x) at another depth, as a duck's head in front of
+    its body: a textured box and a smaller one of another colour on its front top edge."""
+    body = tuple(float(v) for v in rng.uniform((0.5, 0.5, 0.4), (0.8, 0.7, 0.6)))
+    head = float(rng.uniform(0.2, 0.3))
+    reach = float(rng.uniform(0.15, 0.3))  # how far the head sticks out beyond the body's front
+    texture = DISTRACTOR_TEXTURES[int(rng.integers(len(DISTRACTOR_TEXTURES)))]
+    colour = _COLOURS[int(rng.integers(len(_COLOURS)))]
+    return ObjectSpec("head_and_body", (
+        Part("cube.obj", scale=body, texture=texture),
+        Part("cube.obj", rgba=colour, scale=(head, head, head),
+             position=(body[0] / 2 + reach - head / 2, 0.0, body[2] / 2 + head / 2 - 0.05))))
+
+
+def _backdrop(rng: np.random.Generator, table_top: float, camera_azimuth: float) -> Placement:
+    """A textured panel standing on the table 10-30 cm behind the target as seen from ``camera_azimuth``,
+    facing the camera (its broad side across the view)."""
+    sides = (0.04, 1.0, float(rng.uniform(0.5, 0.8)))
+    texture = WALL_TEXTURES[int(rng.integers(len(WALL_TEXTURES)))]
+    spec = ObjectSpec("backdrop", (Part("cube.obj", scale=sides, texture=texture),))
+    radius = float(rng.uniform(0.25, 0.35))
+    distance = TARGET_RADIUS + float(rng.uniform(*BACKDROP_GAP)) + sides[0] / 2
+    azimuth = camera_azimuth + math.pi + float(rng.uniform(-0.2, 0.2))
+    return Placement(spec, (distance * math.cos(azimuth), distance * math.sin(azimuth),
+                            table_top + half_height(spec, radius)), radius, math.degrees(azimuth))
+
+
+def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: float,
+                  challenge: str = "clutter") -> TabletopLayout:
     """A seeded scene around ``target``: 2-4 distractors (one close behind the target as seen from azimuth
-    ``behind_azimuth + pi``, the others 0.2-0.5 m away, none overlapping), random textures and light."""
+    ``behind_azimuth + pi``, the others 0.2-0.5 m away, none overlapping), random textures and light.
+
+    ``challenge`` (``CHALLENGES``): "parts" turns the target's front (+x) towards ``behind_azimuth``;
+    "touching" puts the first distractor, a box, against the target's side as seen from there; "backdrop"
+    adds a panel 10-30 cm behind the target; "clutter" and "off_centre" (a matter of the camera) add nothing.
+    """
+    if challenge not in CHALLENGES:
+        raise ValueError(f"challenge must be one of {', '.join(CHALLENGES)}, got {challenge!r}")
     table_top = -half_height(target, TARGET_RADIUS)
     placed: list[Placement] = []
     count = int(rng.integers(2, 5))
-    for k, spec in enumerate(_distractor_pool(rng, count)):
+    pool = _distractor_pool(rng, count)
+    if challenge == "touching":
+        sides = tuple(float(v) for v in rng.uniform(0.5, 1.0, size=3))
+        pool[0] = ObjectSpec("box_touching", (Part("cube.obj", scale=sides, texture=DISTRACTOR_TEXTURES[
+            int(rng.integers(len(DISTRACTOR_TEXTURES)))]),))
+    for k, spec in enumerate(pool):
         radius = float(rng.uniform(0.05, 0.1))
         for _ in range(100):
-            if k == 0:
+            if k == 0 and challenge == "touching":  # bounding balls overlapping: the box leans on the target
+                side = 1.0 if rng.random() < 0.5 else -1.0
+                distance = 0.8 * (TARGET_RADIUS + radius)
+                azimuth = behind_azimuth + side * (math.pi / 2 + rng.uniform(-0.4, 0.4))
+            elif k == 0:
                 distance, azimuth = TARGET_RADIUS + radius + 0.02, behind_azimuth + math.pi + rng.uniform(-0.3, 0.3)
             else:
                 distance, azimuth = rng.uniform(0.2, 0.5), rng.uniform(0.0, 2.0 * math.pi)
@@ -110,12 +159,15 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
                 break
         z = table_top + half_height(spec, radius)
         placed.append(Placement(spec, (x, y, z), radius, float(rng.uniform(0.0, 360.0))))
+    if challenge == "backdrop":
+        placed.append(_backdrop(rng, table_top, behind_azimuth))
     elevation, direction = rng.uniform(math.radians(35), math.radians(75)), rng.uniform(0.0, 2.0 * math.pi)
     light = Light((math.cos(elevation) * math.cos(direction), math.cos(elevation) * math.sin(direction),
                    math.sin(elevation)), float(rng.uniform(0.5, 0.7)), float(rng.uniform(0.4, 0.6)), True)
+    yaw = math.degrees(behind_azimuth) if challenge == "parts" else 0.0
     walls = tuple(WALL_TEXTURES[int(i)] for i in rng.integers(0, len(WALL_TEXTURES), size=4))
     return TabletopLayout(
-        target=Placement(target, (0.0, 0.0, 0.0), TARGET_RADIUS, 0.0),
+        target=Placement(target, (0.0, 0.0, 0.0), TARGET_RADIUS, yaw),
         distractors=tuple(placed), table_top=table_top,
         table_texture=TABLE_TEXTURES[int(rng.integers(len(TABLE_TEXTURES)))], wall_textures=walls, light=light)
 
@@ -190,3 +242,27 @@ def tabletop_cameras(rng: np.random.Generator, count: int, polar_deg: tuple[floa
     low, high = (math.radians(a) for a in polar_deg)
     return np.stack([rng.uniform(low, high, count), rng.uniform(0.0, 2.0 * math.pi, count),
                      rng.uniform(*distance, count)], axis=-1)
+
+
+def challenge_camera(sphere: np.ndarray, rng: np.random.Generator, off_centre: bool) -> np.ndarray:
+    """Optical camera-to-world frame (4, 4) of a roll-free camera at ``sphere`` = (polar, azimuth, radius) looking
+    at the target, or, ``off_centre``, at a point beside it, so that the target's centre sits 55-95 % of the
+    way from the image centre to the edge (of a 60 deg field of view): partly out of the frame, often."""
+    polar, azimuth, radius = (float(v) for v in sphere)
+    eye = radius * np.array([math.sin(polar) * math.cos(azimuth), math.sin(polar) * math.sin(azimuth), math.cos(polar)])
+    aim = np.zeros(3)
+    if off_centre:
+        forward = -eye / np.linalg.norm(eye)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        down = np.cross(forward, right)
+        angle = rng.uniform(0.55, 0.95) * math.radians(30.0)  # of the half field of view
+        direction = rng.uniform(0.0, 2.0 * math.pi)
+        offset = radius * math.tan(angle) * (math.cos(direction) * right + math.sin(direction) * down)
+        aim = -offset  # aim beside the target: it appears displaced by ``offset``
+    forward = (aim - eye) / np.linalg.norm(aim - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    frame = np.eye(4)
+    frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = right, np.cross(forward, right), forward, eye
+    return frame

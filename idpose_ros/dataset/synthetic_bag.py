@@ -39,12 +39,13 @@ from idpose_core.synthetic.scenes import (
 from idpose_core.synthetic.tabletop import TabletopRenderer, random_layout, tabletop_cameras
 from idpose_core.transforms import split_transform
 from idpose_ros.evaluation.bag_io import TYPESTORE, BagError, BagWriter
+from idpose_ros.evaluation.ground_truth import TRUE_MASK_TOPIC
 from msg_adapters import array_to_image, depth_to_image, matrix_to_camera_info, matrix_to_pose
 
 WORLD, BASE, LINK, OPTICAL, IMU = "world", "base_link", "camera_link", "camera_optical_frame", "camera_imu_frame"
 IMAGE_TOPIC, INFO_TOPIC, POSE_TOPIC = "/camera/image_raw", "/camera/camera_info", "/camera/pose"
 IMU_TOPIC, ORIENTATION_TOPIC = "/camera/imu", "/camera/orientation"
-DEPTH_TOPIC, TRUE_MASK_TOPIC = "/camera/depth/image_raw", "/ground_truth/target_mask"
+DEPTH_TOPIC = "/camera/depth/image_raw"
 START_NS = 100 * 1_000_000_000  # first view at t = 100 s
 PERIOD_NS = 1_000_000_000  # one view per second
 STOP_NS = 100_000_000  # the robot holds still 0.1 s either side of a view

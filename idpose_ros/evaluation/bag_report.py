@@ -92,13 +92,26 @@ def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, fl
     return model, {"guesses": guesses, **random}
 
 
+def border_views(estimate: dict[str, Any]) -> list[int] | None:
+    """The ids of the estimate's views whose masks touch the image border, or None when its estimator did not
+    report masks (replay mode)."""
+    details = estimate.get("details") or {}
+    if "views" not in details:
+        return None
+    return [view_id for view_id, view in zip(estimate["views"], details["views"]) if view["touches_border"]]
+
+
 def inputs_summary(run: BagEvaluation) -> dict[str, int]:
-    """How many estimates took the anchor's polar angle from gravity and its distance from depth, and how many
-    views' masks each method made."""
+    """How many estimates took the anchor's polar angle from gravity and its distance from depth, how many
+    views' masks each method made, how many estimates had a view whose mask touches the image border and how
+    many views were unreliable (touching the border, or ambiguous)."""
     details = [estimate["details"] for estimate in run.estimates if estimate.get("details")]
     used = {"estimates": len(run.estimates),
             "polar_from_gravity": sum(d["polar_source"] == "gravity" for d in details),
-            "distance_from_depth": sum(d["distance_source"] == "depth" for d in details)}
+            "distance_from_depth": sum(d["distance_source"] == "depth" for d in details),
+            "estimates_touching_border": sum(bool(border_views(estimate)) for estimate in run.estimates),
+            "views_touching_border": sum(view["touches_border"] for d in details for view in d["views"]),
+            "unreliable_views": sum(not view["reliable"] for d in details for view in d["views"])}
     methods = [view["mask_method"] for d in details for view in d["views"]]
     return {**used, **{f"masks_{method}": methods.count(method) for method in sorted(set(methods))}}
 
@@ -110,7 +123,10 @@ def inputs_sentence(extras: ExtraTopics, used: dict[str, int]) -> str:
     given = [f"{kind} from {topic}" for kind, topic in topics if topic]
     masks = ", ".join(f"{key[6:]} {count}" for key, count in used.items() if key.startswith("masks_"))
     effect = (f"of {used['estimates']} estimates, {used['polar_from_gravity']} took the anchor's polar angle from "
-              f"gravity and {used['distance_from_depth']} its distance from depth")
+              f"gravity and {used['distance_from_depth']} its distance from depth, and "
+              f"{used['estimates_touching_border']} had a view whose object mask touches the image border "
+              f"({used['views_touching_border']} views; {used['unreliable_views']} views unreliable, counting "
+              "ambiguous ones)")
     return (f"Inputs: {', '.join(given) or 'the images only'}; {effect}" + (f"; masks: {masks}" if masks else "")
             + ".\n")
 
@@ -164,10 +180,13 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         "views": {"total": len(views.views), "usable": len(views.pool), "skipped": [
             {"view": view_id, "stamp": views_by_id[view_id].stamp * 1e-9, "reason": reason}
             for view_id, reason in views.skipped.items()]},
-        "picks": run.picks, "estimates": run.estimates, "pairs": run.records, "aggregates": aggregates,
+        "picks": run.picks,
+        "estimates": [{**estimate, "views_touching_border": border_views(estimate)} for estimate in run.estimates],
+        "pairs": run.records, "aggregates": aggregates,
         "random_baseline": {"guesses_per_pair": len(run.random_records) // max(len(run.records), 1),
                             "aggregates": random_aggregates},
         **({"baselines": baselines, "intrinsics": intrinsics_note(run)} if baselines else {}),
+        **({"mask_iou": run.mask_iou} if run.mask_iou else {}),
         "failed_estimates": run.failures,
         "seconds": run.seconds,
     }
@@ -184,8 +203,10 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         f"Ground truth: {report['ground_truth']}. {inputs_sentence(gt.extras, report['inputs']['used'])}"
         f"Views on {gt.image_topic}: {len(views.views)}, "
         f"usable {len(views.pool)}, skipped {len(views.skipped)}. "
-        f"Estimates: {len(run.estimates)} scored, {len(run.failures)} failed.\n\n"
-        f"{table}\n\n"
+        f"Estimates: {len(run.estimates)} scored, {len(run.failures)} failed.\n"
+        + (f"Masks against the true masks on {run.mask_iou['true_mask_topic']}: IoU mean {run.mask_iou['mean']:.3f}, "
+           f"worst {run.mask_iou['worst']:.3f} ({run.mask_iou['views']} views).\n" if run.mask_iou else "")
+        + f"\n{table}\n\n"
         "Accuracies in %: rotation error below 15° / 30°, camera-centre error below 0.2 x the anchor's distance. "
         f"{RANDOM_METHOD}: each pair's target camera guessed uniformly on the sphere at the anchor's distance, "
         f"{report['random_baseline']['guesses_per_pair']} guesses per pair (its pairs column counts guesses).\n"

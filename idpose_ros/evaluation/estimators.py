@@ -16,7 +16,7 @@ import numpy as np
 from idpose_core.evaluation.estimator import ViewSetEstimate, ViewSetEstimator
 from idpose_core.model_loading import load_predictor
 from idpose_core.noise_predictor import NoisePredictor
-from idpose_core.pipeline import MODEL_IMAGE_SIZE, estimate_view_poses, result_details
+from idpose_core.pipeline import MODEL_IMAGE_SIZE, estimate_view_poses, result_details, view_crops
 from idpose_core.solver import Progress, SolverConfig
 from idpose_core.view_input import ViewInput
 from idpose_ros.evaluation.replay import ReplayEstimator
@@ -86,7 +86,8 @@ class OfflineEstimator:
         result = estimate_view_poses(self.predictor, views, settings, progress=progress)
         solved = result.solver_result
         return ViewSetEstimate(result.poses, np.asarray(solved.scores), np.asarray(solved.ambiguous),
-                               time.perf_counter() - start, result_details(result))
+                               time.perf_counter() - start, result_details(result), tuple(result.masks),
+                               view_crops(result.preprocessed.images))
 
     def close(self) -> None:
         """Nothing to release: the model goes with the object."""

@@ -9,12 +9,16 @@ from idpose_core.evaluation.protocol import OBJECT_CENTER, WORLD_UP
 from idpose_ros.evaluation.bag_io import BagError
 from idpose_ros.evaluation.bag_views import BagViews, ExtraTopics, default_camera_info_topic, read_bag_views
 
+TRUE_MASK_TOPIC = "/ground_truth/target_mask"  # where make_synthetic_bag --scene tabletop puts the target's masks
+
 
 @dataclass(frozen=True)
 class GroundTruthOptions:
     """Where a bag's views and their true camera poses are: the image topic, and /tf from ``world_frame``
     (or the PoseStamped ``gt_topic`` matched within ``gt_tolerance`` s); the object's centre and the
-    world's up axis in the world frame; the views' other inputs (depth, mask, intrinsics, gravity)."""
+    world's up axis in the world frame; the views' other inputs (depth, mask, intrinsics, gravity); and
+    ``true_mask_topic``, the target's true masks (mono8, matched by stamp within ``extras.tolerance``) that
+    the offline pipeline's masks are scored against when the bag has the topic (never an input)."""
 
     image_topic: str = "/camera/image_raw"
     world_frame: str = "world"
@@ -23,6 +27,7 @@ class GroundTruthOptions:
     object_center: tuple[float, float, float] = OBJECT_CENTER
     up: tuple[float, float, float] = WORLD_UP
     extras: ExtraTopics = ExtraTopics()
+    true_mask_topic: str = TRUE_MASK_TOPIC
 
     @property
     def inputs(self) -> ExtraTopics:

@@ -80,12 +80,26 @@ def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> 
 def result_inputs(result: PipelineResult) -> dict[str, str]:
     """Diagnostic values of what an estimate read off its views: where the anchor's polar angle and distance
     came from, and per view k (0 = the anchor) the mask method (and why a more trusted one was not used),
-    the roll and polar angle from gravity."""
+    whether the mask touches the image border and whether the pose is reliable, the roll and polar angle from
+    gravity."""
     values = {"anchor_polar_deg": f"{result.anchor_polar_deg:.2f}", "anchor_polar_source": result.polar_source,
               "object_distance": f"{result.object_distance:.4f}", "object_distance_source": result.distance_source}
     for k, view in enumerate(result.views):
         values[f"view_{k}_mask"] = view.mask_method + (f" ({view.mask_note})" if view.mask_note else "")
+        values[f"view_{k}_touches_border"] = str(view.touches_border).lower()
+        values[f"view_{k}_reliable"] = str(view.reliable).lower()
         if view.roll_deg is not None:
             values[f"view_{k}_roll_deg"] = f"{view.roll_deg:.2f}"
             values[f"view_{k}_polar_deg"] = f"{view.polar_deg:.2f}"
     return values
+
+
+def border_warning(result: PipelineResult) -> str | None:
+    """The warning for a published estimate whose views' masks touch the image border (their objects are likely
+    cut off, so those poses are unreliable), naming the views as /diagnostics does (0 = the anchor); None when
+    no mask does."""
+    views = [k for k, view in enumerate(result.views) if view.touches_border]
+    if not views:
+        return None
+    names = ", ".join("view 0 (the anchor: every pose is measured from it)" if k == 0 else f"view {k}" for k in views)
+    return f"unreliable pose: the object mask of {names} touches the image border; the object may be cut off"

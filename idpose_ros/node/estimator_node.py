@@ -42,7 +42,7 @@ from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_core.solver import Progress, SolverConfig
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.estimate_result import result_message
-from idpose_ros.node.diagnostics import RUNNING_STATES, EstimatorStatus, diagnostic_array, result_inputs
+from idpose_ros.node.diagnostics import RUNNING_STATES, EstimatorStatus, border_warning, diagnostic_array, result_inputs
 from idpose_ros.node.estimate_run import EstimateRefused, EstimateRun, refusal_result
 from idpose_ros.node.input_sync import IMAGE_INPUTS, InputSync
 from idpose_ros.node.job_runner import JobRunner, Outcome
@@ -562,6 +562,8 @@ class EstimatorNode(LifecycleNode):
             self._ambiguous = tuple(bool(a) for a in solved.ambiguous)
             self._inputs = result_inputs(result)
         self._finish(run, "idle", message)
+        if warning := border_warning(result):
+            self.get_logger().warning(warning)
         self.get_logger().info(f"published {len(result.poses)} poses in frame '{run.frame_id}' "
                                f"after {outcome.seconds:.1f} s ({int(sum(self._ambiguous))} ambiguous)")
 
