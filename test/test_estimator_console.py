@@ -4,7 +4,7 @@ The node comes up from install/ (after sourcing install/setup.sh), refuses ~/est
 views, starts an estimate on two views, and a Ctrl-C (SIGINT) in the middle of it, while a camera
 streams raw 1080p frames that the node keeps decoding, stops the estimate within 0.5 s and ends the
 process cleanly within 2 s; invalid start-up parameters are FATAL under the node's full name. The
-walk-through script of docs/node.md, run as written, gets the poses from it. Reduced: the tiny random
+example client (examples/estimate_poses_client.py) gets the poses from it through the action. Reduced: the tiny random
 Zero-1-to-3 on 32 px views, 2 azimuth candidates, probe batch 1, no adjustment steps, 2 refinement
 and 1 runner-up steps per view (endless refinement, 10^6 steps, where the SIGINT must land during
 the run); torch on one thread (test/conftest.py).
@@ -32,6 +32,7 @@ from msg_adapters import array_to_image
 ROOT = Path(__file__).resolve().parents[1]
 NAMESPACE = "/console"
 NODE = f"{NAMESPACE}/idpose_estimator"
+EXAMPLE_CLIENT = ROOT / "examples" / "estimate_poses_client.py"
 SHUTDOWN_LIMIT = 2.0  # seconds: Ctrl-C during an estimate must end the node within this
 CANCEL_LIMIT = 0.5  # seconds from Ctrl-C until the running estimate has stopped
 VIEW_INTERVAL = 0.25  # s, min_view_interval while a camera streams
@@ -164,32 +165,29 @@ def test_invalid_start_up_parameters_are_fatal_under_the_node_s_full_name(worksp
     assert "[some.robot.idpose_estimator]: invalid parameters:" in fatal and "variant must be one of" in fatal
 
 
-def walk_through_script() -> str:
-    """The Python block of docs/node.md's "## Walk-through" section, as a user would copy it."""
-    section = (ROOT / "docs" / "node.md").read_text().split("\n## Walk-through\n", 1)[1].split("\n## ", 1)[0]
-    (script,) = re.findall(r"```python\n(.*?)```", section, flags=re.DOTALL)
-    return script
-
-
-def test_the_walk_through_script_gets_the_poses(workspace, tiny_model_dir, object_views, tmp_path):
+def test_the_example_client_captures_views_and_reads_the_action_result(workspace, tiny_model_dir, object_views,
+                                                                     tmp_path):
+    """examples/estimate_poses_client.py, run as docs/node.md says, against the installed node."""
     views = tmp_path / "views"
     views.mkdir()
     for index, (rgb, alpha) in enumerate(object_views[:3]):
         cv2.imwrite(str(views / f"{index:02d}.png"), np.dstack([cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), alpha]))
-    script = tmp_path / "send_views.py"
-    script.write_text(walk_through_script())
     log = tmp_path / "estimator.log"
     process = start_estimator(workspace, "/walkthrough", {
         **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request"}, log)
     try:
-        command = f"{sys.executable} {script} {views} --ros-args -r __ns:=/walkthrough"
-        result = subprocess.run(in_workspace(workspace, command),
-                                capture_output=True, text=True, timeout=120)
-        assert result.returncode == 0, result.stderr + log.read_text()
+        command = f"{sys.executable} {EXAMPLE_CLIENT} {views} --ros-args -r __ns:=/walkthrough"
+        result = subprocess.run(in_workspace(workspace, command), capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0, result.stdout + result.stderr + log.read_text()
         lines = result.stdout.splitlines()
-        assert lines[:4] == [f"0{k}.png -> captured view {k + 1} (Image bgra8)" for k in range(3)] + [
-            "estimating the poses of 3 views (run 1)"]
-        assert lines[4] == "view 0: position (0.000, 0.000, 0.000) m, quaternion (0.000, 0.000, 0.000, 1.000)"
-        assert [line.split(":")[0] for line in lines[5:]] == ["view 1", "view 2"]
+        assert lines[:3] == [f"0{k}.png -> captured view {k + 1} (Image bgra8)" for k in range(3)]
+        feedback = [line for line in lines if line.startswith("feedback: ")]
+        assert feedback and all(re.fullmatch(r"feedback: [a-z-]+ \d+%, \d+ samples, [\d.]+ s", f) for f in feedback)
+        (summary,) = [line for line in lines if line.startswith("run ")]
+        assert re.fullmatch(r"run 1: 3 poses in frame 'camera_optical' after [\d.]+ s", summary)
+        poses = [line for line in lines if line.startswith("view ")]
+        assert poses[0] == ("view 0: position (0.000, 0.000, 0.000) m, quaternion (0.000, 0.000, 0.000, 1.000), "
+                            "confidence 1.00")
+        assert [line.split(":")[0] for line in poses[1:]] == ["view 1", "view 2"]
     finally:
         stop(process, log)

@@ -129,7 +129,7 @@ def test_report_files(tmp_path, oracle_run):
 def test_an_estimate_names_its_views_whose_masks_touch_the_border():
     views = [{"touches_border": flag} for flag in (False, True, True)]
     assert border_views({"views": [4, 7, 9], "details": {"views": views}}) == [7, 9]
-    assert border_views({"views": [4, 7], "details": {}}) is None  # replay mode: the node reports no masks
+    assert border_views({"views": [4, 7], "details": {}}) is None  # an estimate that reports no masks
 
 
 def test_node_values_follow_the_node_parameters():
@@ -151,7 +151,7 @@ def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch)
     """The command in both modes on the same seed; replay goes through a real estimator node over ROS.
 
     The model loader of both paths is swapped for the oracle fixture (no real model is fast here);
-    publishing, ~/capture, ~/estimate, ~/poses and /diagnostics are the node's own.
+    the EstimatePoses action and its result are the node's own.
     """
     monkeypatch.setattr(estimators, "load_predictor", lambda *args, **kwargs: oracle)
     monkeypatch.setattr(estimator_node, "load_predictor", lambda *args, **kwargs: oracle)
@@ -173,7 +173,7 @@ def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch)
         np.testing.assert_allclose(a["pred_rel_sph"], b["pred_rel_sph"], atol=1e-9)
         assert a["rot_err_deg"] == pytest.approx(b["rot_err_deg"], abs=1e-6)
         assert a["pos_err"] == pytest.approx(b["pos_err"], abs=1e-9)
-        assert a["score"] == pytest.approx(b["score"], rel=1e-5)  # /diagnostics carries 6 significant digits
+        assert a["score"] == pytest.approx(b["score"], rel=1e-6)  # the action result carries it as float32
         assert a["ambiguous"] == b["ambiguous"]
     for group in offline["aggregates"]:
         for key in ("rot_acc_15", "rot_acc_30", "pos_acc_0.2", "pairs"):

@@ -80,4 +80,4 @@ def test_a_wrong_node_name_is_a_clear_error(tmp_path, capsys, monkeypatch):
     code = evaluate_bag.main([str(DEMO_BAG), "--mode", "replay", "--node", "/no_such/idpose_estimator",
                               "--out", str(tmp_path)])
     assert code == 2
-    assert "no estimator node answers /no_such/idpose_estimator/" in capsys.readouterr().err
+    assert "no estimator node serves /no_such/idpose_estimator/estimate_poses" in capsys.readouterr().err

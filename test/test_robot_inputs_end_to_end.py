@@ -106,3 +106,22 @@ def test_replay_reads_the_same_gravity_as_offline(rolled_bag, monkeypatch):
         assert offline["rot_err_deg"] == pytest.approx(replay["rot_err_deg"], abs=1e-4)
     assert all(record["rot_err_deg"] < 5.0 for record in runs["replay"].records)
     assert math.isfinite(runs["replay"].estimates[0]["seconds"])
+    for offline, replay in zip(runs["offline"].estimates, runs["replay"].estimates):
+        assert replay["details"]["polar_source"] == "gravity"
+        assert_same_details(offline["details"], replay["details"])
+
+
+def assert_same_details(offline, replay) -> None:
+    """Equal, numbers to float32 precision (the action result carries angles and distances as float32)."""
+    if isinstance(offline, dict):
+        assert offline.keys() == replay.keys()
+        for key in offline:
+            assert_same_details(offline[key], replay[key])
+    elif isinstance(offline, list):
+        assert len(offline) == len(replay)
+        for a, b in zip(offline, replay):
+            assert_same_details(a, b)
+    elif isinstance(offline, float):
+        assert replay == pytest.approx(offline, rel=1e-6, abs=1e-5)
+    else:
+        assert offline == replay

@@ -440,7 +440,8 @@ class EstimatorNode(LifecycleNode):
             goal_handle.abort()
             return refusal_result(refusal, self._run_id)
         cancel_asked = False
-        next_feedback = 0.0
+        goal_handle.publish_feedback(run.feedback())
+        next_feedback = time.monotonic() + FEEDBACK_PERIOD
         while not run.finished.wait(CANCEL_POLL):
             if goal_handle.is_cancel_requested and not cancel_asked:
                 cancel_asked = self._cancel_run("an EstimatePoses cancel") is not None
