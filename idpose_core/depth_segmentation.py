@@ -5,7 +5,8 @@ normal points up: along gravity when it is known, else towards the top of the im
 stands above it, split that into connected pieces at depth jumps (an object in front of another is a
 different piece), give a piece that does not reach the plane back to the piece it stands out in front
 of (a duck's head in front of its body: a part, not an object), take the target's piece (the one in the
-region of interest, else the one nearest the image centre) and let GrabCut, seeded from it, settle the boundary the depth leaves ragged.
+region of interest, else the one nearest the image centre) and let GrabCut, seeded from it, settle the
+boundary the depth leaves ragged.
 Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
 """
 from __future__ import annotations
