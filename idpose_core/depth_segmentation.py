@@ -3,8 +3,10 @@
 Back-project the depth with the intrinsics, find the support plane by RANSAC (the largest plane whose
 normal points up: along gravity when it is known, else towards the top of the image), keep what
 stands above it, split that into connected pieces at depth jumps (an object in front of another is a
-different piece), take the target's piece (the one in the region of interest, else the one nearest
-the image centre) and let GrabCut, seeded from it, settle the boundary the depth leaves ragged.
+different piece), give a piece that does not reach the plane back to the piece it stands out in front
+of (a duck's head in front of its body: a part, not an object), take the target's piece (the one in the
+region of interest, else the one nearest the image centre) and let GrabCut, seeded from it, settle the
+boundary the depth leaves ragged.
 Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
 """
 from __future__ import annotations
@@ -28,6 +30,9 @@ MIN_HEIGHT = 0.008  # m, or 1.5 % of the median depth when larger: standing on t
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
 MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
 CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
+SUPPORT_HEIGHT = 0.05  # m, or 5 % of the median depth when larger: a piece whose lowest points are this close
+# to the plane stands on it (a curved bottom starts a few cm up); one whose lowest points (5th percentile) are
+# higher is carried by another piece
 GRABCUT_ITERATIONS = 4
 GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
 CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
@@ -127,6 +132,39 @@ def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[in
     return count, labels
 
 
+def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, depth: np.ndarray,
+                         support: float) -> np.ndarray:
+    """The labels with every piece that does not reach the plane (its 5th-percentile height above ``support``)
+    merged into a larger neighbouring piece it stands out in front of (nearer the camera where they meet; of
+    several, the one with the longest shared edge): a part of an object that a depth jump cut off. A piece
+    behind its neighbour stays apart: an object partly hidden by the target."""
+    labels = labels.copy()
+    kernel = np.ones((3, 3), np.uint8)
+    areas = np.bincount(labels.ravel(), minlength=count)
+    for piece in np.argsort(areas):  # smallest first: a head joins its body before the body is judged
+        if piece == 0 or areas[piece] == 0:
+            continue
+        inside = labels == piece
+        if np.percentile(height[inside], 5) <= support:
+            continue
+        ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
+        neighbours, shared = np.unique(labels[ring], return_counts=True)
+        best, best_shared = 0, 0
+        for other, length in zip(neighbours, shared):
+            if other == 0 or other == piece or areas[other] <= areas[piece]:
+                continue
+            edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside
+            front = np.median(depth[edge & (depth > 0)]) if (edge & (depth > 0)).any() else np.inf
+            back = depth[ring & (labels == other) & (depth > 0)]
+            if back.size and front < np.median(back) and length > best_shared:
+                best, best_shared = other, length
+        if best:
+            labels[inside] = best
+            areas[best] += areas[piece]
+            areas[piece] = 0
+    return labels
+
+
 def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] | None) -> np.ndarray:
     """The target's piece (H, W) bool: the one with most pixels inside ``roi``; else, among the pieces that do not
     touch the image border (if any), the largest of those whose centroid is within ``CENTRE_MARGIN`` of the one
@@ -203,7 +241,10 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(seed))
     height = plane.height(points)
     above = valid & (height > _tolerance(points[valid], MIN_HEIGHT, 0.015))
-    count, labels = _pieces(above, np.where(valid, view.depth, 0.0), valid)
+    depth = np.where(valid, view.depth, 0.0)
+    count, labels = _pieces(above, depth, valid)
+    labels = merge_carried_pieces(labels, count, np.where(valid, height, 0.0), depth,
+                                  _tolerance(points[valid], SUPPORT_HEIGHT, 0.05))
     piece = _fill_holes(target_piece(labels, count, view.roi))
     on_plane = valid & (np.abs(height) < _tolerance(points[valid], PLANE_TOLERANCE, 0.01))
     mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece

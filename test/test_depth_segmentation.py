@@ -111,3 +111,14 @@ def test_the_distance_to_a_ball_is_its_centre():
     estimate = object_distance(ViewInput(np.zeros((SIZE, SIZE, 3), np.uint8), depth=depth, intrinsics=K), hit)
     assert estimate == pytest.approx(np.linalg.norm(centre), rel=0.05)
     assert estimate > np.linalg.norm(centre) - 0.5 * radius  # beyond the visible surface's mean (0.53 m)
+
+
+@pytest.mark.parametrize("scene", [3, 5])
+def test_a_part_standing_out_in_front_of_the_body_stays_with_it(scene):
+    """A rendered head-and-body target turned towards the camera (bench/mask_quality.py's "parts" scenes): the
+    head is a separate piece at a depth jump, and it must come back to the body (the body alone: IoU 0.69-0.70)."""
+    from bench.mask_quality import challenge_view
+    from idpose_core.preprocessing import mask_iou
+
+    view, truth = challenge_view("parts", scene, seed=0, size=320)
+    assert mask_iou(depth_cut(view).mask, truth) > 0.85
