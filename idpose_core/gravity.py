@@ -105,13 +105,18 @@ def resting_acceleration(stamps: np.ndarray, accelerations: np.ndarray, stamp: i
     still for the picture). Stamps are integer nanoseconds; ``stamps`` (M,), ``accelerations`` (M, 3).
     GravityUnavailable when the newest reading at or before ``stamp`` (or just after, within
     ``tolerance``) is more than ``tolerance`` away from it."""
+    return np.asarray(accelerations, dtype=np.float64)[resting_window(stamps, stamp, window, tolerance)].mean(axis=0)
+
+
+def resting_window(stamps: np.ndarray, stamp: int, window: int, tolerance: int) -> np.ndarray:
+    """Which readings (bool (M,)) ``resting_acceleration`` averages: those of the ``window`` before ``stamp`` and
+    those within ``tolerance`` of it; GravityUnavailable when none is within ``tolerance``."""
     stamps = np.asarray(stamps, dtype=np.int64)
     near = np.abs(stamps - stamp) <= tolerance
     if not near.any():
         raise GravityUnavailable(f"no IMU reading within {tolerance * 1e-9:g} s of the image stamp "
                                  f"{stamp * 1e-9:.3f} s")
-    chosen = (stamps >= stamp - window) & (stamps <= stamp) | near
-    return np.asarray(accelerations, dtype=np.float64)[chosen].mean(axis=0)
+    return (stamps >= stamp - window) & (stamps <= stamp) | near
 
 
 

@@ -29,13 +29,16 @@ from msg_adapters import (
 @dataclass(frozen=True)
 class ViewMessages:
     """One view as messages: its image and the depth, mask and CameraInfo that go with it (None where there is
-    none), and world up in its optical frame (None without gravity)."""
+    none), world up in its optical frame (None without gravity), and where the node took them: its region of
+    interest and the Imu or orientation messages its gravity came from."""
 
     image: Image | CompressedImage
     depth: Image | None = None
     mask: Image | None = None
     camera_info: CameraInfo | None = None
     gravity_up: np.ndarray | None = None
+    roi: tuple[int, int, int, int] | None = None
+    gravity_source: tuple[object, ...] = ()
 
 
 def decode_image(message: Image | CompressedImage, max_pixels: int | None = None

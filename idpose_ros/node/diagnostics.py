@@ -33,11 +33,14 @@ class EstimatorStatus:
     scores: tuple[float, ...] = field(default_factory=tuple)
     ambiguous: tuple[bool, ...] = field(default_factory=tuple)
     inputs: dict[str, str] = field(default_factory=dict)  # what the last result read off its views (result_inputs)
+    recording: dict[str, str] = field(default_factory=dict)  # the flight recorder's (FlightRecorder.status)
 
 
 def level(status: EstimatorStatus) -> bytes:
-    """ERROR when the last estimate or the model load failed, OK otherwise."""
-    return DiagnosticStatus.ERROR if status.state == "failed" else DiagnosticStatus.OK
+    """ERROR when the last estimate or the model load failed, WARN when the recording stopped, OK otherwise."""
+    if status.state == "failed":
+        return DiagnosticStatus.ERROR
+    return DiagnosticStatus.WARN if status.recording.get("recording", "").startswith("error") else DiagnosticStatus.OK
 
 
 def summary(status: EstimatorStatus) -> str:
@@ -69,6 +72,7 @@ def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> 
         values[f"view_{view}_score"] = f"{score:.6g}"
         values[f"view_{view}_ambiguous"] = str(bool(ambiguous)).lower()
     values.update(status.inputs)
+    values.update(status.recording)
     entry = DiagnosticStatus(level=level(status), name=STATUS_NAME, message=summary(status),
                              hardware_id=hardware_id,
                              values=[KeyValue(key=k, value=v) for k, v in values.items()])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 from idpose_core.solver import estimate_fraction
 from idpose_interfaces.action import EstimatePoses
@@ -33,6 +34,7 @@ class EstimateRun:
     run_id: int
     views: list[View]
     frame_id: str
+    values: dict[str, Any] = field(default_factory=dict)  # the parameter values it runs on
     started: float = field(default_factory=time.monotonic)
     stage: str = "preprocessing"
     fraction: float = 0.0

@@ -44,6 +44,7 @@ from idpose_interfaces.action import EstimatePoses
 from idpose_ros.estimate_result import result_message
 from idpose_ros.node.diagnostics import RUNNING_STATES, EstimatorStatus, border_warning, diagnostic_array, result_inputs
 from idpose_ros.node.estimate_run import EstimateRefused, EstimateRun, refusal_result
+from idpose_ros.node.flight_recorder import FlightRecorder
 from idpose_ros.node.input_sync import IMAGE_INPUTS, InputSync
 from idpose_ros.node.job_runner import JobRunner, Outcome
 from idpose_ros.node.model_holder import ModelHolder, ModelUnavailable
@@ -59,7 +60,7 @@ from idpose_ros.node.parameters import (
 from idpose_ros.node.raw_image import RawImage
 from idpose_ros.node.tf_broadcast import PoseBroadcaster
 from idpose_ros.node.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
-from idpose_ros.view_decoding import with_inputs
+from idpose_ros.view_decoding import ViewMessages, with_inputs
 from msg_adapters import (
     AdapterError,
     ImageTooLarge,
@@ -111,6 +112,9 @@ class EstimatorNode(LifecycleNode):
         self._sync = InputSync(settings.gravity, optical_from_imu(settings), settings.imu_window,
                                settings.input_tolerance)
         self._roi: tuple[int, int, int, int] | None = None  # the latest region of interest, for views kept later
+        self._recorder = FlightRecorder(settings.record_dir, settings.record_max_bytes, self._buffer.snapshot,
+                                        self.get_logger().info, self.get_logger().error)
+        self._buffer.restore(self._recorder.start(settings.resume, {"node": self.get_fully_qualified_name()}))
         self._jobs = JobRunner(self.get_logger().info)
         self._model = ModelHolder(self._load_model, self._model_unavailable)
         self._status_lock = threading.Lock()
@@ -298,9 +302,11 @@ class EstimatorNode(LifecycleNode):
                                        "required)")
                 self.get_logger().warning(f"{name}: kept without gravity ({matched.gravity_problem})",
                                           throttle_duration_sec=THROTTLE)
-            pixels = with_inputs(pixels, matched.depth, matched.mask, matched.camera_info, matched.gravity_up,
-                                 self._roi)
+            roi = self._roi
+            pixels = with_inputs(pixels, matched.depth, matched.mask, matched.camera_info, matched.gravity_up, roi)
             precheck_view(pixels, name)
+            received = (ViewMessages(image.message, matched.depth, matched.mask, matched.camera_info,
+                                     matched.gravity_up, roi, matched.gravity_source) if self._recorder.on else None)
         except ImageRefused:
             raise
         except ImageTooLarge as exc:
@@ -311,7 +317,8 @@ class EstimatorNode(LifecycleNode):
             raise ImageRefused(str(exc)) from exc
         except Exception as exc:  # an adapter bug must not kill the node or the views it holds
             raise ImageRefused(f"{name}: it failed to decode: {type(exc).__name__}: {exc}") from exc
-        return View(pixels, frame_id=image.frame_id, stamp=image.stamp, source=image.source, pending=matched.pending)
+        return View(pixels, frame_id=image.frame_id, stamp=image.stamp, source=image.source, pending=matched.pending,
+                    received=received)
 
     # ----- other inputs ----------------------------------------------------------------------------------------
     def _on_image_input(self, kind: str, msg: Image) -> None:
@@ -322,7 +329,10 @@ class EstimatorNode(LifecycleNode):
             if not self._sync.fits(kind, msg, stamp_nanoseconds(view.stamp)):
                 return None
             try:
-                return replace(view, input=with_inputs(view.input, **{kind: msg}), pending=view.pending - {kind})
+                done = replace(view, input=with_inputs(view.input, **{kind: msg}), pending=view.pending - {kind},
+                               received=view.received and replace(view.received, **{kind: msg}))
+                self._recorder.view_input(view, kind, msg)
+                return done
             except AdapterError as exc:
                 taken = stamp_nanoseconds(view.stamp) * 1e-9
                 self.get_logger().warning(f"the {kind} image for a view taken at {taken:.3f} s is not used: {exc}",
@@ -348,6 +358,7 @@ class EstimatorNode(LifecycleNode):
         self._roi = (msg.x_offset, msg.y_offset, msg.width, msg.height) if msg.width and msg.height else None
 
     def _kept(self, view: View, count: int, settings: NodeSettings) -> None:
+        self._recorder.view_kept(count, view)
         role = "anchor" if count == 1 else f"view {count}"
         height, width = view.input.rgb.shape[:2]
         self.get_logger().info(f"kept {role} ({view.source}, {width}x{height}, "
@@ -409,6 +420,7 @@ class EstimatorNode(LifecycleNode):
         """Cancel a running estimate (its result is dropped whenever it stops) and drop every view, at once."""
         run_id = self._cancel_run("~/reset")
         dropped = self._buffer.clear()
+        self._recorder.event("reset", dropped=dropped)
         cancelled = "" if run_id is None else f" and cancelled the estimate (run {run_id})"
         self.get_logger().info(f"reset: dropped {dropped} views{cancelled}")
         response.success = True
@@ -421,7 +433,9 @@ class EstimatorNode(LifecycleNode):
             if self._state != "estimating" or not self._jobs.cancel():
                 return None
             self._state, self._cancelled_by = "cancelling", cause
-            return self._run_id
+            run_id = self._run_id
+        self._recorder.event("cancel", run_id=run_id, by=cause)
+        return run_id
 
     def _nothing_to_cancel(self) -> str:
         with self._status_lock:
@@ -508,7 +522,7 @@ class EstimatorNode(LifecycleNode):
             if self._state in RUNNING_STATES:
                 verb = "running" if self._state == "estimating" else "stopping after a cancel"
                 raise EstimateRefused(EstimatePoses.Result.BUSY, f"busy: the estimate (run {self._run_id}) is {verb}")
-            run = EstimateRun(self._run_id + 1, views, frame_id)
+            run = EstimateRun(self._run_id + 1, views, frame_id, values=values)
 
             def job(progress: Progress, cancel: threading.Event) -> PipelineResult:
                 predictor = self._model.get()  # waits for a load still running
@@ -556,6 +570,7 @@ class EstimatorNode(LifecycleNode):
         headers = [Header(frame_id=view.frame_id, stamp=view.stamp) for view in run.views]
         message = result_message(result, headers, run.frame_id, run_id, outcome.seconds)
         self._publish(result, message)
+        self._recorder.result(message, run.values, run.views)
         solved = result.solver_result
         with self._status_lock:
             self._last_run_seconds = outcome.seconds
@@ -605,7 +620,8 @@ class EstimatorNode(LifecycleNode):
                 images_received=self._images_received,
                 stage=progress.stage if progress else "", progress_percent=progress.percent if progress else 0.0,
                 last_error=self._last_error, last_run_seconds=self._last_run_seconds,
-                scores=self._scores, ambiguous=self._ambiguous, inputs=self._inputs)
+                scores=self._scores, ambiguous=self._ambiguous, inputs=self._inputs,
+                recording=self._recorder.status())
 
     def _publish_diagnostics(self) -> None:
         hardware_id = f"{self.get_fully_qualified_name()} ({node_settings(current_values(self)).device})"
@@ -620,7 +636,9 @@ class EstimatorNode(LifecycleNode):
         """Cancel a running estimate and wait up to ``timeout`` s; True when nothing is left running."""
         if self._cancel_run("shutdown") is not None:
             self.get_logger().info("shutting down: cancelling the running estimate")
-        return self._jobs.wait(timeout)
+        stopped = self._jobs.wait(timeout)
+        self._recorder.close()
+        return stopped
 
 
 def _interrupt(signum: int, frame: Any) -> None:

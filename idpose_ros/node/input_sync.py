@@ -21,7 +21,7 @@ from sensor_msgs.msg import CameraInfo, Image, Imu
 from idpose_core.gravity import (
     IMU_WINDOW_S,
     GravityUnavailable,
-    resting_acceleration,
+    resting_window,
     up_from_acceleration,
     up_from_orientation,
 )
@@ -38,7 +38,8 @@ ORIENTATION_HISTORY = 2000  # orientations kept
 @dataclass(frozen=True)
 class Matched:
     """What the other topics hold for one view: depth and mask messages (None when none matches yet, with the
-    kind in ``pending`` when its topic is live), CameraInfo, world up in the optical frame, and why gravity
+    kind in ``pending`` when its topic is live), CameraInfo, world up in the optical frame and the messages
+    it came from (``gravity_source``: the Imu readings of the window, or one orientation), and why gravity
     is missing (``gravity_problem``)."""
 
     depth: Image | None = None
@@ -47,6 +48,7 @@ class Matched:
     gravity_up: np.ndarray | None = None
     pending: frozenset[str] = frozenset()
     gravity_problem: str = ""
+    gravity_source: tuple[Imu | QuaternionStamped | PoseStamped, ...] = ()
 
 
 @dataclass
@@ -93,14 +95,14 @@ class InputSync:
         """An accelerometer reading; AdapterError for one without a direction."""
         reading = imu_acceleration(message)
         with self._lock:
-            self._imu.items.append((stamp_nanoseconds(message.header.stamp), reading))
+            self._imu.items.append((stamp_nanoseconds(message.header.stamp), reading, message))
             self._imu.last_seen = now
 
     def add_orientation(self, message: QuaternionStamped | PoseStamped, now: int) -> None:
         """The optical frame's orientation in a z-up frame; AdapterError for one that is not a rotation."""
         up = up_from_orientation(orientation_rotation(message))
         with self._lock:
-            self._orientation.items.append((stamp_nanoseconds(message.header.stamp), up))
+            self._orientation.items.append((stamp_nanoseconds(message.header.stamp), up, message))
             self._orientation.last_seen = now
 
     # ----- matching --------------------------------------------------------------------------------------------
@@ -123,19 +125,25 @@ class InputSync:
         return abs(stamp_nanoseconds(message.header.stamp) - stamp) <= self.tolerance
 
     def gravity_up(self, stamp: int) -> np.ndarray:
-        """World up in the optical frame at ``stamp``: from the orientation topic when it has a reading within the
-        tolerance, else from the accelerometer. GravityUnavailable says why there is none."""
+        """World up in the optical frame at ``stamp`` (``gravity_reading``)."""
+        return self.gravity_reading(stamp)[0]
+
+    def gravity_reading(self, stamp: int) -> tuple[np.ndarray, tuple[Imu | QuaternionStamped | PoseStamped, ...]]:
+        """World up in the optical frame at ``stamp`` and the messages it came from: the orientation topic's
+        reading when one is within the tolerance, else the accelerometer's over the window.
+        GravityUnavailable says why there is none."""
         with self._lock:
             orientations = list(self._orientation.items)
             imu = list(self._imu.items)
         if orientations:
-            index = int(match_stamps([stamp], [s for s, _ in orientations], self.tolerance)[0])
+            index = int(match_stamps([stamp], [s for s, _, _ in orientations], self.tolerance)[0])
             if index >= 0:
-                return orientations[index][1]
+                return orientations[index][1], (orientations[index][2],)
         if imu:
-            acceleration = resting_acceleration(np.array([s for s, _ in imu]), np.stack([a for _, a in imu]),
-                                                stamp, self.imu_window, self.tolerance)
-            return up_from_acceleration(acceleration, self.optical_from_imu)
+            chosen = resting_window(np.array([s for s, _, _ in imu]), stamp, self.imu_window, self.tolerance)
+            acceleration = np.stack([a for _, a, _ in imu])[chosen].mean(axis=0)
+            return (up_from_acceleration(acceleration, self.optical_from_imu),
+                    tuple(message for (_, _, message), used in zip(imu, chosen) if used))
         if orientations:
             raise GravityUnavailable(f"no orientation within {self.tolerance * 1e-9:g} s of the image stamp")
         raise GravityUnavailable("no Imu or orientation message received")
@@ -149,10 +157,10 @@ class InputSync:
             info = self._camera_info
         if info is not None and (info.width, info.height) != size:
             info = None
-        up, problem = None, ""
+        up, problem, source = None, "", ()
         if self.gravity == "required" or (self.gravity == "auto" and live & {"imu", "orientation"}):
             try:
-                up = self.gravity_up(stamp)
+                up, source = self.gravity_reading(stamp)
             except GravityUnavailable as err:
                 problem = str(err)
-        return Matched(found["depth"], found["mask"], info, up, pending, problem)
+        return Matched(found["depth"], found["mask"], info, up, pending, problem, source)

@@ -90,6 +90,16 @@ class NodeSettings:
     input_tolerance: float = field(default=INPUT_TOLERANCE_S, metadata=_spec(
         "largest stamp difference (s) between an image and its depth, mask or gravity reading",
         bounds=(0.0, 1.0), read_only=True))
+    record_dir: str = field(default="", metadata=_spec(
+        "folder of the flight recording: every kept view with its inputs, every published result, ~/reset and "
+        "cancel events appended to an mcap file, flushed message by message; empty = no recording",
+        read_only=True))
+    resume: bool = field(default=True, metadata=_spec(
+        "with record_dir: at start, refill the buffer with the views the newest recording kept since its last "
+        "~/reset (a recording that cannot be read is set aside as <name>.refused)", read_only=True))
+    record_max_bytes: int = field(default=2_000_000_000, metadata=_spec(
+        "size at which the recording rotates to a new file (which starts with the buffered views)",
+        bounds=(1_000_000, 2**62), read_only=True))
 
 
 SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {

@@ -12,6 +12,7 @@ from builtin_interfaces.msg import Time
 
 from idpose_core.pipeline import ViewInput
 from idpose_ros.node.raw_image import RawImage
+from idpose_ros.view_decoding import ViewMessages
 
 
 @dataclass(frozen=True)
@@ -23,6 +24,7 @@ class View:
     stamp: Time
     source: str  # e.g. "Image rgb8" or "CompressedImage png", for log lines
     pending: frozenset[str] = frozenset()  # inputs whose message had not arrived when the view was kept
+    received: ViewMessages | None = None  # the messages it was made from, kept while the node records
 
 
 class CaptureRefused(Exception):
@@ -93,6 +95,12 @@ class ViewBuffer:
         for an image that cannot be one) and keep it; returns the view and the new number of views."""
         view = prepare(self._take_latest())
         return view, self._keep(view, now)
+
+    def restore(self, views: list[View]) -> None:
+        """Views resumed from a recording, in capture order, in place of an empty buffer (a bound lowered since
+        does not drop them)."""
+        with self._lock:
+            self._views = list(views)
 
     def complete(self, kind: str, fill: Callable[[View], View | None]) -> int:
         """Give views still waiting for ``kind`` (depth, mask) what ``fill`` makes of them (None: not this one);
