@@ -23,7 +23,8 @@ from idpose_ros.node.parameters import (
 
 ROOT = Path(__file__).resolve().parents[1]
 READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "autostart", "publish_tf",
-             "diagnostics_period", "gravity", "imu_to_optical", "imu_window", "input_tolerance"}
+             "diagnostics_period", "gravity", "imu_to_optical", "imu_window", "input_tolerance",
+             "record_dir", "resume", "record_max_bytes"}
 
 
 @pytest.fixture

@@ -9,7 +9,6 @@ estimates go on.
 """
 from __future__ import annotations
 
-import os
 import resource
 import signal
 import subprocess
@@ -23,7 +22,6 @@ from geometry_msgs.msg import PoseArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import Image
-from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from test_estimator_node import FAST_SOLVER, header
 

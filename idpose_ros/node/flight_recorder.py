@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -69,7 +69,7 @@ class FlightRecorder:
         self._buffered, self._info, self._error = buffered, log_info, log_error
         self._lock = threading.Lock()
         self._writer: RecordingWriter | None = None
-        self._started = datetime.now(timezone.utc)
+        self._started = datetime.now(UTC)
         self._segment = 0
         self.problem = ""  # why the recording stopped
         self.resumed = ""  # what the start found in record_dir

@@ -99,7 +99,7 @@ class NodeSettings:
         "~/reset (a recording that cannot be read is set aside as <name>.refused)", read_only=True))
     record_max_bytes: int = field(default=2_000_000_000, metadata=_spec(
         "size at which the recording rotates to a new file (which starts with the buffered views)",
-        bounds=(1_000_000, 2**62), read_only=True))
+        bounds=(1_000_000, 2**40), read_only=True))
 
 
 SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {

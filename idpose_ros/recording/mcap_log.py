@@ -10,6 +10,7 @@ carries its full ros2msg definition, as rosbags' readers need.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 from collections.abc import Iterator
@@ -101,10 +102,8 @@ class McapLog:
 
     def abandon(self) -> None:
         """Close the file as it is (after a write failed: it stays readable up to its last whole record)."""
-        try:
+        with contextlib.suppress(OSError):
             self._file.close()
-        except OSError:
-            pass
 
 
 def _records(stream: BinaryIO, size: int) -> Iterator[tuple[object, int]]:
