@@ -5,7 +5,9 @@ The views are the images of ``--image-topic``; their true camera poses come from
 PoseStamped ``--gt-topic``. Seeded picks of 8 views are evaluated on their first 2, 4, 6 and 8
 views, the first view being the anchor, either in-process (``--mode offline``) or by replaying the
 views to the estimator node over ROS (``--mode replay``). Writes report.json, report.md and
-cameras_<sample>.png into ``--out``. With ``--baselines colmap features`` the classical baselines run
+cameras_<sample>.png into ``--out``. A flight recording of the node (``record_dir``) is evaluated on
+its own estimates: each is estimated again and scored beside the result the node published. With
+``--baselines colmap features`` the classical baselines run
 on the same views of every estimate and get their own rows. Offline, ``--save-views DIR`` writes each
 used view's mask and the crop the model saw into DIR/views, and a bag with true target masks gets
 each view's mask IoU in the report.
@@ -36,6 +38,7 @@ from idpose_ros.evaluation.bag_io import BagError
 from idpose_ros.evaluation.bag_report import write_report
 from idpose_ros.evaluation.estimators import make_estimator
 from idpose_ros.evaluation.ground_truth import read_views, require_usable, skipped_note
+from idpose_ros.evaluation.recording import evaluate_recording, is_recording
 from idpose_ros.evaluation.replay import ReplayError
 from idpose_ros.evaluation.view_masks import check_save_views
 
@@ -63,6 +66,10 @@ def main(argv: list[str] | None = None) -> int:
         options.node_values()  # bad solver options, then a bad bag, fail before a model is loaded
         if args.save_views is not None:
             check_save_views(options.mode)
+        if is_recording(args.bag):  # the node's recorded estimates, each estimated again
+            estimator = make_estimator(options)
+            evaluation = evaluate_recording(args.bag, estimator, ground_truth, protocol)
+            return finish(args, evaluation)
         views = read_views(args.bag, ground_truth)
         if skipped_note(views):
             print(f"evaluate_bag: {skipped_note(views)}", file=sys.stderr)
@@ -80,6 +87,11 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if estimator is not None:
             estimator.close()
+    return finish(args, evaluation)
+
+
+def finish(args: argparse.Namespace, evaluation) -> int:
+    """Write the report, print its table and where it is; the exit code."""
     table = write_report(args.out, evaluation)
     print(table)
     print(f"report: {args.out / 'report.md'}, {args.out / 'report.json'}")

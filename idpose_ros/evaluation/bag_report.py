@@ -160,7 +160,7 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
     estimator = run.estimator
     values, preset, mode, model = (estimator[key] for key in ("node_parameters", "solver_preset", "mode", "model"))
     method = f"ID-Pose ({values['variant']})"
-    baselines = {name: {"title": TITLES[name], "pairs": run.baseline_records[name],
+    baselines = {name: {"title": TITLES.get(name, name), "pairs": run.baseline_records[name],
                         "estimates": run.baseline_estimates[name],
                         "aggregates": aggregate(run.baseline_records[name]),
                         "convergence": estimate_summary(run.baseline_estimates[name])} for name in run.baselines}

@@ -44,7 +44,7 @@ from idpose_interfaces.action import EstimatePoses
 from idpose_ros.estimate_result import result_message
 from idpose_ros.node.diagnostics import RUNNING_STATES, EstimatorStatus, border_warning, diagnostic_array, result_inputs
 from idpose_ros.node.estimate_run import EstimateRefused, EstimateRun, refusal_result
-from idpose_ros.node.flight_recorder import FlightRecorder
+from idpose_ros.node.flight_recorder import FlightRecorder, subscribe_tf
 from idpose_ros.node.input_sync import IMAGE_INPUTS, InputSync
 from idpose_ros.node.job_runner import JobRunner, Outcome
 from idpose_ros.node.model_holder import ModelHolder, ModelUnavailable
@@ -148,6 +148,8 @@ class EstimatorNode(LifecycleNode):
                 self.create_subscription(kind, topic, self._on_orientation, qos_profile_sensor_data,
                                          callback_group=inputs)
         self.create_subscription(RegionOfInterest, "roi", self._on_roi, 10, callback_group=inputs)
+        if self._recorder.on:
+            self.get_logger().info(subscribe_tf(self, self._recorder, inputs))
         for name, handler in (("capture", self._capture), ("estimate", self._estimate), ("cancel", self._cancel),
                               ("reset", self._reset)):
             self.create_service(Trigger, f"~/{name}", handler, qos_profile=SERVICE_QOS, callback_group=services)

@@ -11,6 +11,7 @@ into the node, so an estimate never fails because of the recorder.
 """
 from __future__ import annotations
 
+import importlib
 import threading
 import time
 from collections.abc import Callable
@@ -18,6 +19,10 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+
+from rclpy.callback_groups import CallbackGroup
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
 
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.node.view_buffer import View
@@ -27,6 +32,7 @@ from idpose_ros.view_decoding import ViewMessages, decode_view
 from msg_adapters import AdapterError, stamp_nanoseconds
 
 PATTERN = "idpose_*.mcap"
+TF_TOPICS = ("/tf", "/tf_static")  # recorded beside the views where tf2_msgs is installed: the ground truth
 REFUSED_SUFFIX = ".refused"
 MAX_CHAIN = 16  # earlier files looked at when the newest ones end while carrying views over
 
@@ -56,6 +62,19 @@ def restored_view(recorded: ViewMessages) -> View:
     return View(decode_view(image, recorded.depth, recorded.mask, recorded.camera_info, recorded.gravity_up,
                             recorded.roi), frame_id=image.header.frame_id, stamp=image.header.stamp,
                 source=source, received=recorded)
+
+
+def subscribe_tf(node: Node, recorder: FlightRecorder, group: CallbackGroup) -> str:
+    """Record /tf and /tf_static (transient local, as tf2 publishes it) where tf2_msgs imports; what it does."""
+    try:
+        message = importlib.import_module("tf2_msgs.msg").TFMessage
+    except ImportError:
+        return "not recording /tf: tf2_msgs is not installed"
+    for topic, qos in ((TF_TOPICS[0], QoSProfile(depth=100)),
+                       (TF_TOPICS[1], QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))):
+        node.create_subscription(message, topic, lambda msg, topic=topic: recorder.other(topic, msg), qos,
+                                 callback_group=group)
+    return "recording /tf and /tf_static"
 
 
 class FlightRecorder:
@@ -215,6 +234,10 @@ class FlightRecorder:
         """A published estimate and the parameter values it ran on."""
         stamps = [stamp_nanoseconds(view.stamp) for view in views]
         self._write(lambda writer: writer.result(result, settings, stamps))
+
+    def other(self, topic: str, message: object) -> None:
+        """A message of another topic (/tf, /tf_static), recorded as received."""
+        self._write(lambda writer: writer.other(topic, message))
 
     def event(self, name: str, **fields: Any) -> None:
         """``reset``, ``cancel``, ...: a JSON event."""

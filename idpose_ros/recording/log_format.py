@@ -95,6 +95,10 @@ class RecordingWriter:
         return written + self.event("result", run_id=result.run_id, seconds=float(result.seconds),
                                     settings=settings, view_stamps=view_stamps)
 
+    def other(self, topic: str, message: object) -> int:
+        """A message of another topic, as received (e.g. /tf for the ground truth): in no group."""
+        return self._message(topic, message)
+
     def close(self) -> None:
         self._log.close()
 

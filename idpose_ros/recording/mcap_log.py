@@ -117,6 +117,17 @@ def _records(stream: BinaryIO, size: int) -> Iterator[tuple[object, int]]:
         return
 
 
+def scan_header(path: Path) -> str:
+    """The library named in an mcap file's header; "" when the file is not mcap or is cut inside its header."""
+    size = path.stat().st_size
+    with open(path, "rb") as stream:
+        if stream.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
+            return ""
+        stream.seek(0)
+        first = next(_records(stream, size), None)
+    return first[0].library if first is not None and isinstance(first[0], Header) else ""
+
+
 def scan_mcap(path: Path, library_prefix: str) -> Scan:
     """Every whole message of an mcap file written by a library whose name starts with ``library_prefix``;
     RecordingUnreadable when it is not mcap, is another library's, is cut inside its header or holds a

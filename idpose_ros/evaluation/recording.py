@@ -1,0 +1,134 @@
+"""Evaluating a flight recording: the node's own estimates, as it made them live, beside a fresh estimate.
+
+A recording is read like any bag through its recorded topics (``/idpose_recorder/image`` and the
+inputs recorded with each view, world up from its view event); its ground truth comes from /tf (where
+the recorder had it) or a ``--gt-topic``. Every recorded result whose views all have ground truth is
+one estimate: the fresh one runs the evaluator's estimator on those views, the live one is the
+result the node published, scored the same way (row ``as estimated live``). The fresh estimate takes
+the anchor's polar angle and distance from the ground truth as every evaluation does; the live one
+took them from the node's parameters (or gravity and depth), so position errors may differ in scale.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from idpose_core.evaluation.estimator import ViewSetEstimate
+from idpose_core.evaluation.object_frame import object_frame_c2w
+from idpose_core.evaluation.protocol import EstimateTask, EvaluationProtocol, tasks_for_picks
+from idpose_core.evaluation.results import Evaluation, evaluate_tasks
+from idpose_core.evaluation.run import run_estimate
+from idpose_core.view_input import ViewInput
+from idpose_ros.estimate_result import view_set_estimate
+from idpose_ros.evaluation.bag_evaluation import BagEvaluation
+from idpose_ros.evaluation.bag_io import BagError
+from idpose_ros.evaluation.bag_views import BagViews, load_views
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
+from idpose_ros.recording.log_format import IMAGE_TOPIC, INPUT_TOPICS, LIBRARY_PREFIX, Recording, read_recording
+from idpose_ros.recording.mcap_log import RecordingUnreadable, scan_header
+
+LIVE_METHOD = "as estimated live"
+
+
+def is_recording(path: Path) -> bool:
+    """Whether ``path`` is an mcap file the flight recorder wrote."""
+    return path.is_file() and path.suffix == ".mcap" and scan_header(path).startswith(LIBRARY_PREFIX)
+
+
+def recording_ground_truth(recording: Recording, ground_truth: GroundTruthOptions) -> GroundTruthOptions:
+    """``ground_truth`` on the recorded topics: the image topic, and each input every view was kept with."""
+    views = [event for event in recording.events if event["event"] == "view"]
+    every = {kind for kind in INPUT_TOPICS if views and all(kind in event["inputs"] for event in views)}
+    topics = {f"{kind}_topic": INPUT_TOPICS[kind] if kind in every else None for kind in INPUT_TOPICS}
+    return replace(ground_truth, image_topic=IMAGE_TOPIC, extras=replace(ground_truth.extras, **topics))
+
+
+def _with_gravity(views: BagViews, recording: Recording) -> BagViews:
+    """World up per view as the node had it (its view event), in place of a gravity topic."""
+    ups = {event["stamp"]: event["gravity_up"] for event in recording.events if event["event"] == "view"}
+    stamps = {info.view_id: info.stamp for info in views.views}
+    extras = {view_id: replace(sources, gravity_up=None if ups.get(stamps[view_id]) is None
+                               else np.asarray(ups[stamps[view_id]], dtype=np.float64))
+              for view_id, sources in views.extras.items()}
+    return replace(views, extras=extras)
+
+
+def recorded_tasks(recording: Recording, views: BagViews, ground_truth: GroundTruthOptions, seed: int
+                   ) -> tuple[list[EstimateTask], list[ViewSetEstimate], list[str]]:
+    """One task per recorded result whose views all have ground truth, the result as the evaluators take it, and
+    why any other result is left out."""
+    by_stamp: dict[int, int] = {}
+    for info in views.views:
+        by_stamp.setdefault(info.stamp, info.view_id)
+    tasks, live, left_out = [], [], []
+    for recorded in recording.results:
+        pick = [by_stamp.get(stamp) for stamp in recorded.view_stamps]
+        missing = [k for k, view_id in enumerate(pick) if view_id not in views.world_from_camera]
+        if missing:
+            left_out.append(f"run {recorded.result.run_id}: views {missing} are not in the recording or have no "
+                            "ground truth")
+            continue
+        cameras = object_frame_c2w(np.stack([views.world_from_camera[v] for v in pick]), ground_truth.object_center,
+                                   ground_truth.up)
+        (task,) = tasks_for_picks([pick], [cameras], [len(pick)], seed)
+        tasks.append(replace(task, sample=len(tasks), index=len(tasks)))
+        live.append(view_set_estimate(recorded.result))
+    return tasks, live, left_out
+
+
+class LiveEstimates:
+    """The results the node published, handed out in task order as if estimated again."""
+
+    description = {"mode": "live"}
+
+    def __init__(self, estimates: Sequence[ViewSetEstimate], values: dict) -> None:
+        self._estimates, self.values = list(estimates), values
+
+    def __call__(self, views: Sequence[ViewInput], anchor_polar_deg: float, object_distance: float,
+                 progress=None) -> ViewSetEstimate:
+        return self._estimates.pop(0)
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+def evaluate_recording(path: Path, estimator, ground_truth: GroundTruthOptions | None = None,
+                       protocol: EvaluationProtocol | None = None, show_progress: bool = True) -> BagEvaluation:
+    """Each recorded result estimated again by ``estimator`` and scored beside the result itself (``LIVE_METHOD``);
+    BagError when the recording cannot be read or no result can be scored."""
+    started = time.perf_counter()
+    protocol = protocol or EvaluationProtocol()
+    try:
+        recording = read_recording(path)
+    except (RecordingUnreadable, ValueError) as err:
+        raise BagError(f"{str(path)!r} is not a readable flight recording: {err}") from None
+    if not recording.scan.sealed:
+        raise BagError(f"{str(path)!r} has no end (the node was killed while recording): start the node on its "
+                       "record_dir once, which seals it")
+    gt = recording_ground_truth(recording, ground_truth or GroundTruthOptions())
+    views = _with_gravity(read_views(path, gt), recording)
+    tasks, live, left_out = recorded_tasks(recording, views, gt, protocol.seed)
+    if not tasks:
+        reasons = "; ".join(left_out) or "it holds no published result"
+        raise BagError(f"no recorded estimate of {str(path)!r} can be scored: {reasons}")
+    run = BagEvaluation(**Evaluation.planned(tasks, protocol, estimator), bag=Path(path), ground_truth=gt,
+                        views=views)
+    used = {v for task in tasks for v in task.pick}
+    decoded, unusable = load_views(path, gt.image_topic, used, views, gt.inputs)
+    evaluate_tasks(run, estimator, tasks, decoded, unusable, show_progress, name="evaluate_bag")
+    for reason in left_out:
+        print(f"evaluate_bag: left out {reason}", file=sys.stderr)
+    replay = LiveEstimates([estimate for task, estimate in zip(tasks, live) if all(v in decoded for v in task.views)],
+                           {})
+    for task in (task for task in tasks if all(v in decoded for v in task.views)):
+        outcome = run_estimate(replay, task, [decoded[v] for v in task.views])
+        run.baseline_records.setdefault(LIVE_METHOD, []).extend(outcome.records)
+        run.baseline_estimates.setdefault(LIVE_METHOD, []).append(outcome.row)
+    run.baselines = (*run.baselines, LIVE_METHOD)
+    run.seconds = time.perf_counter() - started
+    return run
