@@ -5,7 +5,8 @@ with their images as received, the bag's true camera poses (PoseStamped) recorde
 one published result, estimated by the node's pipeline (the tiny random Zero-1-to-3, a reduced
 solver) on the anchor geometry the evaluation gives every estimate. evaluate_bag then reads the
 recording directly and re-estimates the same views with the same model, seed and settings: the
-fresh row must equal the live row, pair for pair (up to the PoseArray's quaternion rounding). Nothing here checks accuracy (the model is random).
+fresh row must equal the live row, pair for pair (up to the PoseArray's quaternion rounding).
+Nothing here checks accuracy (the model is random).
 """
 from __future__ import annotations
 
