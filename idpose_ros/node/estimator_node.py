@@ -571,8 +571,8 @@ class EstimatorNode(LifecycleNode):
         result: PipelineResult = outcome.value
         headers = [Header(frame_id=view.frame_id, stamp=view.stamp) for view in run.views]
         message = result_message(result, headers, run.frame_id, run_id, outcome.seconds)
+        self._recorder.result(message, run.values, run.views)  # recorded before anyone can see it
         self._publish(result, message)
-        self._recorder.result(message, run.values, run.views)
         solved = result.solver_result
         with self._status_lock:
             self._last_run_seconds = outcome.seconds
