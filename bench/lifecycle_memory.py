@@ -114,7 +114,8 @@ def main() -> None:
     summary = {"config": args.config, "rss_before_node_gb": round(before, 3), "rss_active_gb": active,
                "rss_after_cleanup_gb": cleaned, "freed_share": round((active - cleaned[-1]) / (active - before), 3),
                "machine": platform.processor() or platform.machine(), "steps": rows}
-    print(f"active after an estimate {active:.3f} GB, after cleanup {cleaned[-1]:.3f} GB: {100 * summary['freed_share']:.0f} % of the "
+    freed = 100 * summary["freed_share"]
+    print(f"active after an estimate {active:.3f} GB, after cleanup {cleaned[-1]:.3f} GB: {freed:.0f} % of the "
           "model's memory given back", flush=True)
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "lifecycle_memory.json").write_text(json.dumps(summary, indent=1) + "\n")
