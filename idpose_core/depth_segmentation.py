@@ -4,9 +4,10 @@ Back-project the depth with the intrinsics, find the support plane by RANSAC (th
 normal points up: along gravity when it is known, else towards the top of the image), keep what
 stands above it, split that into connected pieces at depth jumps (an object in front of another is a
 different piece), give a piece that does not reach the plane back to the piece it stands out in front
-of (a duck's head in front of its body: a part, not an object), take the target's piece (the one in the
-region of interest, else the one nearest the image centre) and let GrabCut, seeded from it, settle the
-boundary the depth leaves ragged.
+of and touches (a duck's head in front of its body: a part, not an object), leave out what rises higher
+than a tabletop object can (a wall), take the target's piece (the one in the region of interest, else
+the one nearest the image centre) and let GrabCut, seeded from it, settle the boundary the depth leaves
+ragged. Tolerances grow with each reading's depth, not the image's: a far wall does not loosen them.
 Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
 """
 from __future__ import annotations
@@ -33,6 +34,10 @@ CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the cen
 SUPPORT_HEIGHT = 0.05  # m, or 5 % of the median depth when larger: a piece whose lowest points are this close
 # to the plane stands on it (a curved bottom starts a few cm up); one whose lowest points (5th percentile) are
 # higher is carried by another piece
+ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
+# 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
+GAP_POINTS = 400  # of each side, for the gap between two sets of points
+MAX_OBJECT_HEIGHT = 0.6  # m above the plane: what rises higher is the room (a wall), not an object on the table
 GRABCUT_ITERATIONS = 4
 GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
 CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
@@ -75,18 +80,29 @@ def backproject(depth: np.ndarray, intrinsics: np.ndarray) -> tuple[np.ndarray, 
     return np.stack([x, y, z], axis=-1), valid
 
 
-def _tolerance(points: np.ndarray, base: float, share: float) -> float:
-    return max(base, share * float(np.median(points[:, 2])))
+def _tolerance(depth: np.ndarray, base: float, share: float) -> np.ndarray:
+    """Per reading: ``base`` metres, or ``share`` of its depth when larger (depth noise grows with distance; a far
+    wall in the view does not loosen the test on the table)."""
+    return np.maximum(base, share * depth)
+
+
+def _faces_up(normals: np.ndarray, up: np.ndarray | None) -> np.ndarray:
+    """Which unit normals (N, 3) can carry an object: within ``UP_TOLERANCE_DEG`` of ``up`` when known, else
+    tilted towards the image top by ``IMAGE_UP_MIN``."""
+    if up is not None:
+        return normals @ np.asarray(up, dtype=np.float64) >= math.cos(math.radians(UP_TOLERANCE_DEG))
+    return -normals[:, 1] >= IMAGE_UP_MIN
 
 
 def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Generator) -> Plane:
     """The largest plane among ``points`` (M, 3) that can carry an object: its normal within
-    ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top.
-    DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
+    ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top, both as a
+    hypothesis and once fitted to its inliers. DepthSegmentationError when no such plane holds ``MIN_PLANE_SHARE``
+    of the points."""
     if len(points) < 3:
         raise DepthSegmentationError("too few depth readings to find a support plane")
-    tolerance = _tolerance(points, PLANE_TOLERANCE, 0.01)
     scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]
+    tolerance = _tolerance(scored[:, 2:], PLANE_TOLERANCE, 0.01)
     triples = points[rng.integers(0, len(points), size=(RANSAC_ITERATIONS, 3))]
     normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
     lengths = np.linalg.norm(normals, axis=1)
@@ -94,25 +110,26 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     normals = normals[usable] / lengths[usable, None]
     anchors = triples[usable, 0]
     normals *= np.where(np.sum(normals * anchors, axis=1) > 0, -1.0, 1.0)[:, None]  # towards the camera
-    if up is not None:
-        usable = normals @ np.asarray(up, dtype=np.float64) >= math.cos(math.radians(UP_TOLERANCE_DEG))
-    else:
-        usable = -normals[:, 1] >= IMAGE_UP_MIN
-    normals, anchors = normals[usable], anchors[usable]
+    normals, anchors = normals[_faces_up(normals, up)], anchors[_faces_up(normals, up)]
     if len(normals) == 0:
         raise DepthSegmentationError("no support plane facing up in the depth image")
     offsets = -np.sum(normals * anchors, axis=1)
     inliers = np.abs(scored @ normals.T + offsets) < tolerance  # (sample, hypotheses)
-    best = int(np.argmax(inliers.sum(axis=0)))
-    share = float(inliers[:, best].mean())
+    counts = inliers.sum(axis=0)
+    share = float(counts.max() / len(scored))
     if share < MIN_PLANE_SHARE:
         raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * share:.0f} % "
                                      f"of the readings, {100 * MIN_PLANE_SHARE:.0f} % needed)")
-    on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
-    centre = on_plane.mean(axis=0)
-    normal = np.linalg.svd(on_plane - centre)[2][2]
-    normal = normal if normal @ normals[best] > 0 else -normal
-    return Plane(normal, float(-normal @ centre))
+    for best in np.argsort(-counts, kind="stable"):
+        if counts[best] < MIN_PLANE_SHARE * len(scored):
+            break
+        on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
+        centre = on_plane.mean(axis=0)
+        normal = np.linalg.svd(on_plane - centre)[2][2]
+        normal = normal if normal @ normals[best] > 0 else -normal
+        if _faces_up(normal[None], up)[0]:  # a wall seen by a camera tilted up can pass as a hypothesis only
+            return Plane(normal, float(-normal @ centre))
+    raise DepthSegmentationError("no support plane facing up in the depth image (the planes found face the camera)")
 
 
 def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[int, np.ndarray]:
@@ -132,12 +149,24 @@ def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[in
     return count, labels
 
 
-def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, depth: np.ndarray,
-                         support: float) -> np.ndarray:
-    """The labels with every piece that does not reach the plane (its 5th-percentile height above ``support``)
-    merged into a larger neighbouring piece it stands out in front of (nearer the camera where they meet; of
-    several, the one with the longest shared edge): a part of an object that a depth jump cut off. A piece
-    behind its neighbour stays apart: an object partly hidden by the target."""
+def _gap(front: np.ndarray, back: np.ndarray) -> float:
+    """Median distance (m) from the points ``front`` (N, 3) to their nearest among ``back`` (M, 3), on at
+    most ``GAP_POINTS`` of each (evenly spaced)."""
+    front = front[np.linspace(0, len(front) - 1, min(len(front), GAP_POINTS)).astype(int)]
+    back = back[np.linspace(0, len(back) - 1, min(len(back), GAP_POINTS)).astype(int)]
+    return float(np.median(np.min(np.linalg.norm(front[:, None] - back[None], axis=-1), axis=1)))
+
+
+def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
+                         valid: np.ndarray, support: np.ndarray) -> np.ndarray:
+    """The labels with every piece that does not reach the plane (its 5th-percentile height above its median
+    ``support`` (H, W), m)
+    merged into a larger neighbouring piece it stands out in front of and is attached to (where they meet it is
+    nearer the camera, and its edge points lie within ``ATTACH_GAP`` of the neighbour's; of several, the one with
+    the longest shared edge): a part of an object that a depth jump cut off. A piece behind its neighbour stays
+    apart (an object partly hidden by the target), and so does one that is well in front of it (a ball whose
+    lowest visible points are high on its curve, before a box that stands behind it)."""
+    depth = np.where(valid, points[..., 2], 0.0)
     labels = labels.copy()
     kernel = np.ones((3, 3), np.uint8)
     areas = np.bincount(labels.ravel(), minlength=count)
@@ -145,7 +174,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, dep
         if piece == 0 or areas[piece] == 0:
             continue
         inside = labels == piece
-        if np.percentile(height[inside], 5) <= support:
+        if np.percentile(height[inside], 5) <= np.median(support[inside]):
             continue
         ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
         neighbours, shared = np.unique(labels[ring], return_counts=True)
@@ -153,16 +182,29 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, dep
         for other, length in zip(neighbours, shared):
             if other == 0 or other == piece or areas[other] <= areas[piece]:
                 continue
-            edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside
-            front = np.median(depth[edge & (depth > 0)]) if (edge & (depth > 0)).any() else np.inf
-            back = depth[ring & (labels == other) & (depth > 0)]
-            if back.size and front < np.median(back) and length > best_shared:
+            edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside & valid
+            behind = ring & (labels == other) & valid
+            if length <= best_shared or not edge.any() or not behind.any():
+                continue
+            if (np.median(depth[edge]) < np.median(depth[behind])
+                    and _gap(points[edge], points[behind]) < ATTACH_GAP):
                 best, best_shared = other, length
         if best:
             labels[inside] = best
             areas[best] += areas[piece]
             areas[piece] = 0
     return labels
+
+
+def drop_scenery(labels: np.ndarray, count: int, height: np.ndarray) -> np.ndarray:
+    """The labels without the pieces that rise higher than ``MAX_OBJECT_HEIGHT`` above the plane (their
+    95th-percentile height): the room, not an object on the table (a wall seen by a camera looking up past it)."""
+    areas = np.bincount(labels.ravel(), minlength=count)
+    tops = np.zeros(count)
+    for piece in np.flatnonzero(areas >= MIN_PIECE_SHARE * labels.size):  # smaller ones are never the target
+        tops[piece] = np.percentile(height[labels == piece], 95)
+    tops[0] = 0.0
+    return np.where(tops[labels] > MAX_OBJECT_HEIGHT, 0, labels)
 
 
 def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] | None) -> np.ndarray:
@@ -240,13 +282,14 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
         raise DepthSegmentationError(f"only {100 * valid.mean():.0f} % of the depth image has readings")
     plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(seed))
     height = plane.height(points)
-    above = valid & (height > _tolerance(points[valid], MIN_HEIGHT, 0.015))
     depth = np.where(valid, view.depth, 0.0)
+    above = valid & (height > _tolerance(depth, MIN_HEIGHT, 0.015))
     count, labels = _pieces(above, depth, valid)
-    labels = merge_carried_pieces(labels, count, np.where(valid, height, 0.0), depth,
-                                  _tolerance(points[valid], SUPPORT_HEIGHT, 0.05))
+    labels = merge_carried_pieces(labels, count, np.where(valid, height, 0.0), points, valid,
+                                  _tolerance(depth, SUPPORT_HEIGHT, 0.05))
+    on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
+    labels = drop_scenery(labels, count, np.where(valid, height, 0.0))
     piece = _fill_holes(target_piece(labels, count, view.roi))
-    on_plane = valid & (np.abs(height) < _tolerance(points[valid], PLANE_TOLERANCE, 0.01))
     mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
     return DepthCut(mask=mask, depth_mask=piece, plane=plane)
 
