@@ -23,15 +23,15 @@ from idpose_core.view_input import ViewInput
 
 RANSAC_ITERATIONS = 300
 RANSAC_SAMPLE = 4000  # points scored per plane hypothesis
-PLANE_TOLERANCE = 0.01  # m, or this share of the median depth when larger: a point on the plane
+PLANE_TOLERANCE = 0.01  # m, or 1 % of the reading's depth when larger: a point on the plane
 MIN_PLANE_SHARE = 0.1  # of the valid points: a smaller plane is no support
 UP_TOLERANCE_DEG = 30.0  # the plane normal vs gravity's up (when known)
 IMAGE_UP_MIN = 0.3  # without gravity: the normal's component towards the top of the image at least this
-MIN_HEIGHT = 0.008  # m, or 1.5 % of the median depth when larger: standing on the plane
+MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
 MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
 CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
-SUPPORT_HEIGHT = 0.05  # m, or 5 % of the median depth when larger: a piece whose lowest points are this close
+SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece whose lowest points are this close
 # to the plane stands on it (a curved bottom starts a few cm up); one whose lowest points (5th percentile) are
 # higher is carried by another piece
 ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
@@ -86,19 +86,10 @@ def _tolerance(depth: np.ndarray, base: float, share: float) -> np.ndarray:
     return np.maximum(base, share * depth)
 
 
-def _faces_up(normals: np.ndarray, up: np.ndarray | None) -> np.ndarray:
-    """Which unit normals (N, 3) can carry an object: within ``UP_TOLERANCE_DEG`` of ``up`` when known, else
-    tilted towards the image top by ``IMAGE_UP_MIN``."""
-    if up is not None:
-        return normals @ np.asarray(up, dtype=np.float64) >= math.cos(math.radians(UP_TOLERANCE_DEG))
-    return -normals[:, 1] >= IMAGE_UP_MIN
-
-
 def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Generator) -> Plane:
     """The largest plane among ``points`` (M, 3) that can carry an object: its normal within
-    ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top, both as a
-    hypothesis and once fitted to its inliers. DepthSegmentationError when no such plane holds ``MIN_PLANE_SHARE``
-    of the points."""
+    ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top.
+    DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
     if len(points) < 3:
         raise DepthSegmentationError("too few depth readings to find a support plane")
     scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]
@@ -110,26 +101,25 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     normals = normals[usable] / lengths[usable, None]
     anchors = triples[usable, 0]
     normals *= np.where(np.sum(normals * anchors, axis=1) > 0, -1.0, 1.0)[:, None]  # towards the camera
-    normals, anchors = normals[_faces_up(normals, up)], anchors[_faces_up(normals, up)]
+    if up is not None:
+        usable = normals @ np.asarray(up, dtype=np.float64) >= math.cos(math.radians(UP_TOLERANCE_DEG))
+    else:
+        usable = -normals[:, 1] >= IMAGE_UP_MIN
+    normals, anchors = normals[usable], anchors[usable]
     if len(normals) == 0:
         raise DepthSegmentationError("no support plane facing up in the depth image")
     offsets = -np.sum(normals * anchors, axis=1)
     inliers = np.abs(scored @ normals.T + offsets) < tolerance  # (sample, hypotheses)
-    counts = inliers.sum(axis=0)
-    share = float(counts.max() / len(scored))
+    best = int(np.argmax(inliers.sum(axis=0)))
+    share = float(inliers[:, best].mean())
     if share < MIN_PLANE_SHARE:
         raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * share:.0f} % "
                                      f"of the readings, {100 * MIN_PLANE_SHARE:.0f} % needed)")
-    for best in np.argsort(-counts, kind="stable"):
-        if counts[best] < MIN_PLANE_SHARE * len(scored):
-            break
-        on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
-        centre = on_plane.mean(axis=0)
-        normal = np.linalg.svd(on_plane - centre)[2][2]
-        normal = normal if normal @ normals[best] > 0 else -normal
-        if _faces_up(normal[None], up)[0]:  # a wall seen by a camera tilted up can pass as a hypothesis only
-            return Plane(normal, float(-normal @ centre))
-    raise DepthSegmentationError("no support plane facing up in the depth image (the planes found face the camera)")
+    on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
+    centre = on_plane.mean(axis=0)
+    normal = np.linalg.svd(on_plane - centre)[2][2]
+    normal = normal if normal @ normals[best] > 0 else -normal
+    return Plane(normal, float(-normal @ centre))
 
 
 def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[int, np.ndarray]:
