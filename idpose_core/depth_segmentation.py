@@ -150,10 +150,10 @@ def _gap(front: np.ndarray, back: np.ndarray) -> float:
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
                          valid: np.ndarray, support: np.ndarray) -> np.ndarray:
     """The labels with every piece that does not reach the plane (its 5th-percentile height above its median
-    ``support`` (H, W), m) merged into a neighbouring piece, larger or standing on the plane, that it stands
-    out in front of and is attached to (where they meet it is nearer the camera, and its edge points lie
-    within ``ATTACH_GAP`` of the neighbour's; of several, the one with the longest shared edge): a part of an
-    object that a depth jump cut off (a duck's head and back, larger than the breast seen below them). A
+    ``support`` (H, W), m) merged into a neighbouring piece, larger or (standing on the plane) at least half as
+    large, that it stands out in front of and is attached to (where they meet it is nearer the camera, and its
+    edge points lie within ``ATTACH_GAP`` of the neighbour's; of several, the one with the longest shared edge):
+    a part of an object that a depth jump cut off (a duck's head and back, larger than the breast below them). A
     piece behind its neighbour stays apart (an object partly hidden by the target), and so does one that is
     well in front of it (a ball whose lowest visible points are high on its curve, before a box behind it)."""
     depth = np.where(valid, points[..., 2], 0.0)
@@ -172,7 +172,8 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
         neighbours, shared = np.unique(labels[ring], return_counts=True)
         best, best_shared = 0, 0
         for other, length in zip(neighbours, shared):
-            if other == 0 or other == piece or (areas[other] <= areas[piece] and not standing[other]):
+            if other == 0 or other == piece or not (areas[other] > areas[piece]
+                                                    or (standing[other] and 2 * areas[other] >= areas[piece])):
                 continue
             edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside & valid
             behind = ring & (labels == other) & valid
