@@ -11,20 +11,25 @@ what makes segmentation hard:
   inside the object);
 - touching: a box leaning against the target's side;
 - backdrop: a panel standing 10-30 cm behind the target;
-- off_centre: the camera aimed beside the target, which sits 55-95 % of the way to the image edge (often
-  cut by it).
+- off_centre: the camera aimed beside the target, whose centre sits about 30-65 % of the way to the image
+  edge, every other object's at least 15 % farther out (``off_centre_camera``: the view is still about
+  the target); and the same views again with a region of interest (off_centre_roi: a box around the
+  target grown by 10-30 % on each side, as a detector gives); crowded: off-centre views where another
+  object's centre is 15 % nearer the image centre (only a region of interest says which object the view
+  is about), without and with (crowded_roi) that box.
 
 Targets are the six demo objects in turn (parts: a generated head-and-body). The mask is what the
 pipeline computes from the colour image, the depth and the intrinsics (``foreground_mask``: the depth
 cut, with its fallbacks), without gravity; views where under 300 target pixels are visible are left out.
-Prints mean and worst IoU per type and overall with the number of views, and writes bench/results/
-mask_quality_<seed>.json.
+Prints mean and worst IoU per row and overall (the five failure types) with the number of views, and
+writes bench/results/mask_quality_<seed>.json.
 
     python bench/mask_quality.py [--seed 1000] [--views 8] [--size 320]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -43,6 +48,8 @@ from idpose_core.synthetic.tabletop import (  # noqa: E402
     CHALLENGES,
     TabletopRenderer,
     challenge_camera,
+    loose_box,
+    off_centre_camera,
     parts_target,
     random_layout,
 )
@@ -51,37 +58,66 @@ from idpose_core.view_input import ViewInput  # noqa: E402
 FOV_DEG = 60.0
 POLAR_DEG, DISTANCE = (30.0, 82.0), (0.4, 0.75)
 MIN_VISIBLE = 300  # px of the target that must be in sight
+EXTRA_ROWS = ("off_centre_roi", "crowded", "crowded_roi")  # off-centre views beside the failure types
 
 
-def challenge_view(challenge: str, index: int, seed: int, size: int) -> tuple[ViewInput, np.ndarray] | None:
+def challenge_view(challenge: str, index: int, seed: int, size: int,
+                   crowded: bool = False) -> tuple[ViewInput, np.ndarray] | None:
     """(the view: colour, depth, intrinsics; the target's true mask) of scene ``index`` of a failure type, or
-    None when too little of the target is in sight."""
-    rng = np.random.default_rng([seed, CHALLENGES.index(challenge), index])
+    None when too little of the target is in sight. ``crowded`` (off-centre only): another object nearer the
+    image centre than the target."""
+    rng = np.random.default_rng([seed, CHALLENGES.index(challenge), index] + [1] * crowded)
     target = parts_target(rng) if challenge == "parts" else demo_objects()[index % len(demo_objects())]
-    sphere = np.array([math.radians(rng.uniform(*POLAR_DEG)), rng.uniform(0.0, 2.0 * math.pi),
-                       rng.uniform(*DISTANCE)])
-    layout = random_layout(target, rng, behind_azimuth=float(sphere[1]), challenge=challenge)
+    camera = None
+    while camera is None:  # an off-centre view takes a new scene until a fair aim exists
+        sphere = np.array([math.radians(rng.uniform(*POLAR_DEG)), rng.uniform(0.0, 2.0 * math.pi),
+                           rng.uniform(*DISTANCE)])
+        layout = random_layout(target, rng, behind_azimuth=float(sphere[1]), challenge=challenge)
+        camera = (off_centre_camera(sphere, layout, rng, FOV_DEG, crowded) if challenge == "off_centre"
+                  else challenge_camera(sphere))
     with TabletopRenderer(layout, image_size=size, fov_deg=FOV_DEG) as renderer:
-        frame = renderer.render(challenge_camera(sphere, rng, off_centre=challenge == "off_centre"))
+        frame = renderer.render(camera)
     if frame.target_mask.sum() < MIN_VISIBLE:
         return None
     return ViewInput(frame.rgb, depth=frame.depth, intrinsics=pinhole_intrinsics(size, FOV_DEG)), frame.target_mask
 
 
+def with_roi(view: ViewInput, truth: np.ndarray, seed: int, index: int, crowded: bool) -> ViewInput:
+    """The view with a region of interest: a loose box around the target, as a detector would give."""
+    box = loose_box(truth, np.random.default_rng([seed, len(CHALLENGES) + int(crowded), index]))
+    return dataclasses.replace(view, roi=box)
+
+
+def score(view: ViewInput, truth: np.ndarray, name: str, index: int) -> dict:
+    """The pipeline's mask of one view against the truth: scene index, IoU and mask method (printed)."""
+    mask, method, _ = foreground_mask(view)
+    row = {"scene": index, "iou": mask_iou(mask, truth), "method": method}
+    print(f"  {name} {index}: IoU {row['iou']:.3f} ({method})", file=sys.stderr)
+    return row
+
+
 def measure(seed: int, views: int, size: int) -> dict:
-    """Per failure type: every view's IoU and mask method, with the summary."""
-    results = {}
+    """Per failure type, and the off-centre rows with a region of interest or a crowded centre (``EXTRA_ROWS``):
+    every view's IoU and mask method."""
+    results: dict[str, list[dict]] = {}
     for challenge in CHALLENGES:
-        rows = []
+        results[challenge] = []
         for index in range(views):
             scene = challenge_view(challenge, index, seed, size)
             if scene is None:
                 continue
             view, truth = scene
-            mask, method, _ = foreground_mask(view)
-            rows.append({"scene": index, "iou": mask_iou(mask, truth), "method": method})
-            print(f"  {challenge} {index}: IoU {rows[-1]['iou']:.3f} ({method})", file=sys.stderr)
-        results[challenge] = rows
+            results[challenge].append(score(view, truth, challenge, index))
+            if challenge != "off_centre":
+                continue
+            results.setdefault("off_centre_roi", []).append(
+                score(with_roi(view, truth, seed, index, False), truth, "off_centre_roi", index))
+            crowded = challenge_view(challenge, index, seed, size, crowded=True)
+            if crowded is not None:
+                view, truth = crowded
+                results.setdefault("crowded", []).append(score(view, truth, "crowded", index))
+                results.setdefault("crowded_roi", []).append(
+                    score(with_roi(view, truth, seed, index, True), truth, "crowded_roi", index))
     return results
 
 
@@ -101,7 +137,7 @@ def main() -> None:
     started = time.monotonic()
     results = measure(args.seed, args.views, args.size)
     table = {challenge: summary(rows) for challenge, rows in results.items() if rows}
-    table["all"] = summary([row for rows in results.values() for row in rows])
+    table["all"] = summary([row for name, rows in results.items() if name not in EXTRA_ROWS for row in rows])
     print(f"| type (seed {args.seed}) | views | mean IoU | worst IoU |\n|---|---|---|---|")
     for name, row in table.items():
         print(f"| {name} | {row['views']} | {row['mean']:.3f} | {row['worst']:.3f} |")

@@ -4,9 +4,10 @@ Back-project the depth with the intrinsics, find the support plane by RANSAC (th
 normal points up: along gravity when it is known, else towards the top of the image), keep what
 stands above it, split that into connected pieces at depth jumps (an object in front of another is a
 different piece), give a piece that does not reach the plane back to the piece it stands out in front
-of (a duck's head in front of its body: a part, not an object), take the target's piece (the one in the
-region of interest, else the one nearest the image centre) and let GrabCut, seeded from it, settle the
-boundary the depth leaves ragged.
+of and touches (a duck's head in front of its body: a part, not an object), leave out what rises higher
+than a tabletop object can (a wall), take the target's piece (the one in the region of interest, else
+the one nearest the image centre) and let GrabCut, seeded from it, settle the boundary the depth leaves
+ragged. Tolerances grow with each reading's depth, not the image's: a far wall does not loosen them.
 Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
 """
 from __future__ import annotations
@@ -22,17 +23,21 @@ from idpose_core.view_input import ViewInput
 
 RANSAC_ITERATIONS = 300
 RANSAC_SAMPLE = 4000  # points scored per plane hypothesis
-PLANE_TOLERANCE = 0.01  # m, or this share of the median depth when larger: a point on the plane
+PLANE_TOLERANCE = 0.01  # m, or 1 % of the reading's depth when larger: a point on the plane
 MIN_PLANE_SHARE = 0.1  # of the valid points: a smaller plane is no support
 UP_TOLERANCE_DEG = 30.0  # the plane normal vs gravity's up (when known)
 IMAGE_UP_MIN = 0.3  # without gravity: the normal's component towards the top of the image at least this
-MIN_HEIGHT = 0.008  # m, or 1.5 % of the median depth when larger: standing on the plane
+MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
 MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
 CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
-SUPPORT_HEIGHT = 0.05  # m, or 5 % of the median depth when larger: a piece whose lowest points are this close
+SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece whose lowest points are this close
 # to the plane stands on it (a curved bottom starts a few cm up); one whose lowest points (5th percentile) are
 # higher is carried by another piece
+ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
+# 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
+GAP_POINTS = 400  # of each side, for the gap between two sets of points
+MAX_OBJECT_HEIGHT = 0.6  # m above the plane: what rises higher is the room (a wall), not an object on the table
 GRABCUT_ITERATIONS = 4
 GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
 CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
@@ -75,8 +80,10 @@ def backproject(depth: np.ndarray, intrinsics: np.ndarray) -> tuple[np.ndarray, 
     return np.stack([x, y, z], axis=-1), valid
 
 
-def _tolerance(points: np.ndarray, base: float, share: float) -> float:
-    return max(base, share * float(np.median(points[:, 2])))
+def _tolerance(depth: np.ndarray, base: float, share: float) -> np.ndarray:
+    """Per reading: ``base`` metres, or ``share`` of its depth when larger (depth noise grows with distance; a far
+    wall in the view does not loosen the test on the table)."""
+    return np.maximum(base, share * depth)
 
 
 def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Generator) -> Plane:
@@ -85,8 +92,8 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
     if len(points) < 3:
         raise DepthSegmentationError("too few depth readings to find a support plane")
-    tolerance = _tolerance(points, PLANE_TOLERANCE, 0.01)
     scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]
+    tolerance = _tolerance(scored[:, 2:], PLANE_TOLERANCE, 0.01)
     triples = points[rng.integers(0, len(points), size=(RANSAC_ITERATIONS, 3))]
     normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
     lengths = np.linalg.norm(normals, axis=1)
@@ -132,37 +139,65 @@ def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[in
     return count, labels
 
 
-def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, depth: np.ndarray,
-                         support: float) -> np.ndarray:
-    """The labels with every piece that does not reach the plane (its 5th-percentile height above ``support``)
-    merged into a larger neighbouring piece it stands out in front of (nearer the camera where they meet; of
-    several, the one with the longest shared edge): a part of an object that a depth jump cut off. A piece
-    behind its neighbour stays apart: an object partly hidden by the target."""
+def _gap(front: np.ndarray, back: np.ndarray) -> float:
+    """Median distance (m) from the points ``front`` (N, 3) to their nearest among ``back`` (M, 3), on at
+    most ``GAP_POINTS`` of each (evenly spaced)."""
+    front = front[np.linspace(0, len(front) - 1, min(len(front), GAP_POINTS)).astype(int)]
+    back = back[np.linspace(0, len(back) - 1, min(len(back), GAP_POINTS)).astype(int)]
+    return float(np.median(np.min(np.linalg.norm(front[:, None] - back[None], axis=-1), axis=1)))
+
+
+def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
+                         valid: np.ndarray, support: np.ndarray) -> np.ndarray:
+    """The labels with every piece that does not reach the plane (its 5th-percentile height above its median
+    ``support`` (H, W), m) merged into a neighbouring piece, larger or (standing on the plane) at least half as
+    large, that it stands out in front of and is attached to (where they meet it is nearer the camera, and its
+    edge points lie within ``ATTACH_GAP`` of the neighbour's; of several, the one with the longest shared edge):
+    a part of an object that a depth jump cut off (a duck's head and back, larger than the breast below them). A
+    piece behind its neighbour stays apart (an object partly hidden by the target), and so does one that is
+    well in front of it (a ball whose lowest visible points are high on its curve, before a box behind it)."""
+    depth = np.where(valid, points[..., 2], 0.0)
     labels = labels.copy()
     kernel = np.ones((3, 3), np.uint8)
     areas = np.bincount(labels.ravel(), minlength=count)
+    standing = np.zeros(count, bool)
+    for piece in np.flatnonzero(areas):
+        inside = labels == piece
+        standing[piece] = np.percentile(height[inside], 5) <= np.median(support[inside])
     for piece in np.argsort(areas):  # smallest first: a head joins its body before the body is judged
-        if piece == 0 or areas[piece] == 0:
+        if piece == 0 or areas[piece] == 0 or standing[piece]:
             continue
         inside = labels == piece
-        if np.percentile(height[inside], 5) <= support:
-            continue
         ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
         neighbours, shared = np.unique(labels[ring], return_counts=True)
         best, best_shared = 0, 0
         for other, length in zip(neighbours, shared):
-            if other == 0 or other == piece or areas[other] <= areas[piece]:
+            if other == 0 or other == piece or not (areas[other] > areas[piece]
+                                                    or (standing[other] and 2 * areas[other] >= areas[piece])):
                 continue
-            edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside
-            front = np.median(depth[edge & (depth > 0)]) if (edge & (depth > 0)).any() else np.inf
-            back = depth[ring & (labels == other) & (depth > 0)]
-            if back.size and front < np.median(back) and length > best_shared:
+            edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside & valid
+            behind = ring & (labels == other) & valid
+            if length <= best_shared or not edge.any() or not behind.any():
+                continue
+            if (np.median(depth[edge]) < np.median(depth[behind])
+                    and _gap(points[edge], points[behind]) < ATTACH_GAP):
                 best, best_shared = other, length
         if best:
             labels[inside] = best
             areas[best] += areas[piece]
             areas[piece] = 0
     return labels
+
+
+def drop_scenery(labels: np.ndarray, count: int, height: np.ndarray) -> np.ndarray:
+    """The labels without the pieces that rise higher than ``MAX_OBJECT_HEIGHT`` above the plane (their
+    95th-percentile height): the room, not an object on the table (a wall seen by a camera looking up past it)."""
+    areas = np.bincount(labels.ravel(), minlength=count)
+    tops = np.zeros(count)
+    for piece in np.flatnonzero(areas >= MIN_PIECE_SHARE * labels.size):  # smaller ones are never the target
+        tops[piece] = np.percentile(height[labels == piece], 95)
+    tops[0] = 0.0
+    return np.where(tops[labels] > MAX_OBJECT_HEIGHT, 0, labels)
 
 
 def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] | None) -> np.ndarray:
@@ -240,13 +275,14 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
         raise DepthSegmentationError(f"only {100 * valid.mean():.0f} % of the depth image has readings")
     plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(seed))
     height = plane.height(points)
-    above = valid & (height > _tolerance(points[valid], MIN_HEIGHT, 0.015))
     depth = np.where(valid, view.depth, 0.0)
+    above = valid & (height > _tolerance(depth, MIN_HEIGHT, 0.015))
     count, labels = _pieces(above, depth, valid)
-    labels = merge_carried_pieces(labels, count, np.where(valid, height, 0.0), depth,
-                                  _tolerance(points[valid], SUPPORT_HEIGHT, 0.05))
+    labels = merge_carried_pieces(labels, count, np.where(valid, height, 0.0), points, valid,
+                                  _tolerance(depth, SUPPORT_HEIGHT, 0.05))
+    on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
+    labels = drop_scenery(labels, count, np.where(valid, height, 0.0))
     piece = _fill_holes(target_piece(labels, count, view.roi))
-    on_plane = valid & (np.abs(height) < _tolerance(points[valid], PLANE_TOLERANCE, 0.01))
     mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
     return DepthCut(mask=mask, depth_mask=piece, plane=plane)
 

@@ -5,7 +5,7 @@ background scenes), world up +z; the table top lies under the target, the room's
 it and four textured walls around. Distractors stand on the table around the target, one of them
 close behind it as seen from the first camera. ``challenge`` layouts stage what makes depth segmentation
 hard: a target with a part standing out towards the camera, a box touching the target, a backdrop panel
-10-30 cm behind it (``challenge_camera`` also aims a camera off the target, to cut it at the border).
+10-30 cm behind it; ``off_centre_camera`` aims a camera beside the target, no distractor nearer the centre.
 A render gives the colour image (no alpha), the depth
 along the optical axis in metres, and the target's true mask.
 """
@@ -38,6 +38,10 @@ WALL_TEXTURES = ("tex256.png", "uvmap.png", "checker_blue.png", "jenga/jenga.png
 DISTRACTOR_TEXTURES = ("jenga/jenga.png", "domino/domino.jpg", "checker_blue.png", "uvmap.png")
 CHALLENGES = ("clutter", "parts", "touching", "backdrop", "off_centre")
 BACKDROP_GAP = (0.10, 0.30)  # m from the target's bounding ball to the backdrop panel
+OFF_CENTRE = (0.3, 0.65)  # of the way from the image centre to its edge: where an off-centre target's centre sits
+FAIR_MARGIN = 0.15  # of that way: how much farther out than the target every distractor's centre is
+AIM_TRIES = 100
+LOOSE_BOX = (0.1, 0.3)  # of the box's side: how much a detector's box overshoots the object on each side
 _COLOURS = ((0.85, 0.3, 0.2, 1.0), (0.2, 0.5, 0.85, 1.0), (0.3, 0.7, 0.3, 1.0), (0.9, 0.8, 0.2, 1.0),
             (0.6, 0.3, 0.7, 1.0), (0.2, 0.75, 0.8, 1.0))
 
@@ -244,25 +248,71 @@ def tabletop_cameras(rng: np.random.Generator, count: int, polar_deg: tuple[floa
                      rng.uniform(*distance, count)], axis=-1)
 
 
-def challenge_camera(sphere: np.ndarray, rng: np.random.Generator, off_centre: bool) -> np.ndarray:
-    """Optical camera-to-world frame (4, 4) of a roll-free camera at ``sphere`` = (polar, azimuth, radius) looking
-    at the target, or, ``off_centre``, at a point beside it, so that the target's centre sits 55-95 % of the
-    way from the image centre to the edge (of a 60 deg field of view): partly out of the frame, often."""
-    polar, azimuth, radius = (float(v) for v in sphere)
-    eye = radius * np.array([math.sin(polar) * math.cos(azimuth), math.sin(polar) * math.sin(azimuth), math.cos(polar)])
-    aim = np.zeros(3)
-    if off_centre:
-        forward = -eye / np.linalg.norm(eye)
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        down = np.cross(forward, right)
-        angle = rng.uniform(0.55, 0.95) * math.radians(30.0)  # of the half field of view
-        direction = rng.uniform(0.0, 2.0 * math.pi)
-        offset = radius * math.tan(angle) * (math.cos(direction) * right + math.sin(direction) * down)
-        aim = -offset  # aim beside the target: it appears displaced by ``offset``
+def _look_at(eye: np.ndarray, aim: np.ndarray) -> np.ndarray:
+    """Optical camera-to-world frame (4, 4) of a roll-free camera at ``eye`` looking at ``aim``."""
     forward = (aim - eye) / np.linalg.norm(aim - eye)
     right = np.cross(forward, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
     frame = np.eye(4)
     frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = right, np.cross(forward, right), forward, eye
     return frame
+
+
+def _eye(sphere: np.ndarray) -> np.ndarray:
+    polar, azimuth, radius = (float(v) for v in sphere)
+    return radius * np.array([math.sin(polar) * math.cos(azimuth), math.sin(polar) * math.sin(azimuth),
+                              math.cos(polar)])
+
+
+def challenge_camera(sphere: np.ndarray) -> np.ndarray:
+    """Optical camera-to-world frame (4, 4) of a roll-free camera at ``sphere`` = (polar, azimuth, radius) looking
+    at the target."""
+    return _look_at(_eye(sphere), np.zeros(3))
+
+
+def image_offset(frame: np.ndarray, point: np.ndarray, fov_deg: float) -> float:
+    """How far ``point`` (3,) projects from the image centre of the camera ``frame`` (4, 4), as a share of the way
+    to the edge of a square image of ``fov_deg`` (inf behind the camera)."""
+    local = (np.asarray(point, dtype=np.float64) - frame[:3, 3]) @ frame[:3, :3]
+    if local[2] <= 0:
+        return math.inf
+    return float(np.hypot(local[0], local[1]) / local[2] / math.tan(math.radians(fov_deg) / 2))
+
+
+def off_centre_camera(sphere: np.ndarray, layout: TabletopLayout, rng: np.random.Generator,
+                      fov_deg: float = 60.0, crowded: bool = False) -> np.ndarray | None:
+    """A camera at ``sphere`` aimed beside the target, so that the target's centre sits about ``OFF_CENTRE`` of
+    the way from the image centre to the edge, yet every distractor's centre at least ``FAIR_MARGIN`` farther
+    out: aimed roughly at the target, the view is still about it (with a distractor nearer the centre the
+    target would be the odd choice, as a distractor off-centre is in a centred view). ``crowded``: a distractor
+    ``FAIR_MARGIN`` nearer the centre instead, a view only a region of interest makes about the target. The aim
+    is drawn afresh until that holds; None when ``AIM_TRIES`` draws do not find one."""
+    eye = _eye(sphere)
+    forward = -eye / np.linalg.norm(eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    half = math.radians(fov_deg) / 2
+    for _ in range(AIM_TRIES):
+        angle = math.atan(rng.uniform(*OFF_CENTRE) * math.tan(half))
+        direction = rng.uniform(0.0, 2.0 * math.pi)
+        offset = np.linalg.norm(eye) * math.tan(angle) * (math.cos(direction) * right + math.sin(direction) * down)
+        frame = _look_at(eye, -offset)  # aim beside the target: it appears displaced by ``offset``
+        target = image_offset(frame, np.zeros(3), fov_deg)
+        margin = min((image_offset(frame, np.asarray(p.centre), fov_deg) - target for p in layout.distractors),
+                     default=math.inf)
+        if (margin <= -FAIR_MARGIN) if crowded else (margin >= FAIR_MARGIN):
+            return frame
+    return None
+
+
+def loose_box(mask: np.ndarray, rng: np.random.Generator) -> tuple[int, int, int, int]:
+    """(x, y, width, height) of a box around ``mask`` (H, W) bool as a detector gives it: its tight box grown on
+    each side by a random ``LOOSE_BOX`` share of the box's size, clipped to the image."""
+    rows, cols = np.nonzero(mask)
+    top, bottom, left, right = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    grow = rng.uniform(*LOOSE_BOX, size=4)
+    height, width = bottom - top, right - left
+    top, bottom = max(0, int(top - grow[0] * height)), min(mask.shape[0], int(bottom + grow[1] * height))
+    left, right = max(0, int(left - grow[2] * width)), min(mask.shape[1], int(right + grow[3] * width))
+    return left, top, right - left, bottom - top
