@@ -1,5 +1,6 @@
 """ament_python build of idpose_ros: three Python packages, config, launch files and the ament marker."""
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
@@ -15,7 +16,8 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
-    ] + [(f"share/{PACKAGE}/{bag}", glob(f"{bag}/*")) for bag in sorted(glob("data/demo_bags/*"))],
+    ] + [(f"share/{PACKAGE}/{bag}", glob(f"{bag}/*")) for bag in sorted(
+        str(Path(metadata).parent) for metadata in glob("data/demo_bags/**/metadata.yaml", recursive=True))],
     install_requires=["setuptools"],
     zip_safe=False,
     maintainer="idpose_ros developers",

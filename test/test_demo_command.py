@@ -20,4 +20,10 @@ def test_demo_evaluates_each_demo_object_with_the_embedded_model(tmp_path, monke
         report = json.loads((tmp_path / "demo_output" / name / "report.json").read_text())
         assert report["model"]["model_path"] == "" and report["aggregates"]["2"]["pairs"] == 1
         assert f"| {name} | 1 |" in summary
-    assert "| all | 6 |" in summary
+    assert "| all | 6 |" in summary.split("On a tabletop")[0]
+    assert [bag.name for bag in demo.robot_demo_bags()] == ["duck_tabletop"]
+    robot = json.loads((tmp_path / "demo_output" / "duck_tabletop" / "report.json").read_text())
+    assert robot["aggregates"]["2"]["pairs"] == 1
+    details = robot["estimates"][0]["details"]
+    assert details["distance_source"] == "depth" and details["polar_source"] == "gravity", "the robot's inputs are read"
+    assert "| duck_tabletop | 1 |" in out.split("On a tabletop")[1]

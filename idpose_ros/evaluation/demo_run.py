@@ -1,7 +1,9 @@
 """The demo: every shipped demo bag evaluated with one estimator, then one summary beside random poses.
 
-The bags (``data/demo_bags/<object>``: rendered views of one demo object with ground-truth /tf) are
-found beside the source in a checkout, else in the package's share directory once installed.
+The bags (``data/demo_bags/<object>``: rendered views of one demo object on white with ground-truth
+/tf; ``data/demo_bags/robot/<name>``: a tabletop scene with aligned depth, intrinsics and an IMU, the
+robot's path) are found beside the source in a checkout, else in the package's share directory once
+installed.
 """
 from __future__ import annotations
 
@@ -12,14 +14,21 @@ from ament_index_python.packages import PackageNotFoundError, get_package_share_
 
 from idpose_core.evaluation.estimator import ViewSetEstimator
 from idpose_core.evaluation.protocol import EvaluationProtocol
+from idpose_ros.dataset.synthetic_bag import DEPTH_TOPIC, IMU_TOPIC, INFO_TOPIC
 from idpose_ros.evaluation.bag_evaluation import BagEvaluation, evaluate_bag
 from idpose_ros.evaluation.bag_io import BagError
 from idpose_ros.evaluation.bag_report import pooled_summaries, summary_table, write_report
+from idpose_ros.evaluation.bag_views import ExtraTopics
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions
 
 PACKAGE = "idpose_ros"
 BAGS_FOLDER = Path("data") / "demo_bags"
 SOURCE_BAGS = Path(__file__).resolve().parents[2] / BAGS_FOLDER  # in a checkout
+ROBOT_BAGS = "robot"  # the subfolder of the tabletop bags
 DEMO_PROTOCOL = EvaluationProtocol(samples=1, seed=0, view_counts=(2,))
+# The tabletop bags' inputs as make_synthetic_bag --scene tabletop writes them: depth, intrinsics, gravity.
+ROBOT_INPUTS = GroundTruthOptions(extras=ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC,
+                                                     gravity_topic=IMU_TOPIC))
 
 
 def demo_bag_folder() -> Path:
@@ -37,9 +46,19 @@ def demo_bag_folder() -> Path:
     return installed
 
 
+def bags_in(folder: Path) -> list[Path]:
+    """The bag folders (with metadata.yaml) directly in ``folder``, in name order."""
+    return sorted(path for path in folder.iterdir() if (path / "metadata.yaml").is_file()) if folder.is_dir() else []
+
+
 def demo_bags() -> list[Path]:
-    """The shipped bags, one per demo object, in name order."""
-    return sorted(path for path in demo_bag_folder().iterdir() if (path / "metadata.yaml").is_file())
+    """The shipped bags on white, one per demo object, in name order."""
+    return bags_in(demo_bag_folder())
+
+
+def robot_demo_bags() -> list[Path]:
+    """The shipped tabletop bags (depth, intrinsics, gravity), in name order."""
+    return bags_in(demo_bag_folder() / ROBOT_BAGS)
 
 
 def demo_summary(evaluations: dict[str, BagEvaluation]) -> str:
@@ -50,12 +69,13 @@ def demo_summary(evaluations: dict[str, BagEvaluation]) -> str:
     return summary_table(rows)
 
 
-def run_demo(estimator: ViewSetEstimator, out: Path, say: Callable[[str], None] = print) -> dict[str, BagEvaluation]:
-    """Evaluate every demo bag (one n = 2 estimate each), writing each report into ``out/<object>``; ``say`` gets
-    each bag's table as it is done."""
+def run_demo(estimator: ViewSetEstimator, bags: list[Path], out: Path, options: GroundTruthOptions | None = None,
+             say: Callable[[str], None] = print) -> dict[str, BagEvaluation]:
+    """Evaluate ``bags`` (one n = 2 estimate each) read with ``options``, writing each report into
+    ``out/<bag>``; ``say`` gets each bag's table as it is done."""
     evaluations: dict[str, BagEvaluation] = {}
-    for bag in demo_bags():
+    for bag in bags:
         say(f"\n== {bag.name} ==")
-        evaluations[bag.name] = evaluate_bag(bag, estimator, protocol=DEMO_PROTOCOL)
+        evaluations[bag.name] = evaluate_bag(bag, estimator, options, protocol=DEMO_PROTOCOL)
         say(write_report(out / bag.name, evaluations[bag.name]))
     return evaluations
