@@ -1,8 +1,10 @@
 """`evaluate_dataset INPUT...`: the paper's pose metrics over many inputs, one Ray task per estimate.
 
 Inputs, in any mix: rosbag2 bags (folders, .mcap, .db3, globs; views and ground truth as ``evaluate_bag``
-reads them, seeded picks of 8 views) and official ID-Pose samples files (a .json naming the anchor and
-target views of ``<data_root>/<object>/images/*.png`` + ``poses/*.npy``; its samples fix the views).
+reads them, seeded picks of 8 views), the node's flight recordings (a recorder's .mcap, or a folder of them
+such as a ``record_dir``: each published result estimated again and scored as published, as ``evaluate_bag``
+does, row "as estimated live") and official ID-Pose samples files (a .json naming the anchor and target
+views of ``<data_root>/<object>/images/*.png`` + ``poses/*.npy``; its samples fix the views).
 Every estimate (input x sample x n) is one call on a Ray actor that holds the model (one per worker), on
 a local Ray instance or on a cluster (``--address``). Results stream to ``--out``/results.jsonl as
 estimates finish; a rerun with the same ``--out`` skips the finished ones. A failed estimate is retried
@@ -47,8 +49,9 @@ INTERRUPTED = 130  # the shell's exit code for a process stopped by Ctrl-C
 
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationProtocol]:
     parser = argparse.ArgumentParser(prog="evaluate_dataset", description=__doc__.split("\n\n")[0].split(": ", 1)[1])
-    parser.add_argument("inputs", nargs="+", help="rosbag2 bags (folders, .mcap, .db3; globs) and official "
-                                                  "ID-Pose samples files (.json)")
+    parser.add_argument("inputs", nargs="+", help="rosbag2 bags (folders, .mcap, .db3; globs), flight recordings "
+                                                  "(.mcap, or folders of them) and official ID-Pose samples files "
+                                                  "(.json)")
     parser.add_argument("--out", type=Path, default=Path("dataset_evaluation"),
                         help="results and report folder; rerun into it to resume (default ./dataset_evaluation)")
     add_protocol_arguments(parser, samples_help="random picks of 8 views per bag (official samples are fixed)")
@@ -133,6 +136,9 @@ def main(argv: list[str] | None = None) -> int:
         values = options.node_values()
         inputs = open_inputs(args.inputs, ground_truth)
         planned = [(item, item.plan(protocol)) for item in inputs]
+        for item in inputs:
+            for reason in item.summary().get("left_out", []):
+                print(f"evaluate_dataset: {item.name}: left out {reason}", file=sys.stderr)
         log = ResultsLog(args.out, run_settings(options, values, ground_truth, protocol, args.baselines))
     except (BagError, InputError, ValueError) as err:
         print(f"evaluate_dataset: error: {err}", file=sys.stderr)

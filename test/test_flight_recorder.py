@@ -8,6 +8,7 @@ message, or inside the record being written.
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -55,9 +56,11 @@ class Node:
         self.buffer = self.recorder.start(resume, {"node": "/test"})
 
     def keep(self, messages: ViewMessages) -> None:
+        """Keep a view as ~/capture does: queued, then written before the answer."""
         view = restored_view(messages)
         self.buffer.append(view)
         self.recorder.view_kept(len(self.buffer), view)
+        self.recorder.flush()
 
     def reset(self) -> None:
         self.recorder.event("reset", dropped=len(self.buffer))
@@ -179,3 +182,38 @@ def test_seal_keeps_every_whole_message(tmp_path):
     assert not recording.scan.sealed and recording.scan.cut_bytes == 0 and len(recording.buffered) == 2
     seal_mcap(path, recording.scan)
     assert len(read_recording(path).buffered) == 2
+
+
+def test_keeping_a_view_does_not_wait_for_the_disk_and_flush_does(tmp_path):
+    """The image callback only queues a view; ``flush`` (before ~/capture answers) returns once it is in the file.
+    A depth image given to a view under the buffer's lock rotates the file without asking the buffer again."""
+    lock = threading.Lock()  # the node's buffer lock: ``complete`` holds it while a late input is recorded
+    kept: list = []
+
+    def buffered() -> list:
+        with lock:
+            return list(kept)
+
+    recorder = FlightRecorder(str(tmp_path), 10**9, buffered, print, print)
+    recorder.start(False, {"node": "/test"})
+    kept.append(restored_view(view_messages(0)))
+    with recorder._lock:  # the writer thread is busy (a slow disk): keeping a view must not wait for it
+        callback = threading.Thread(target=recorder.view_kept, args=(1, kept[0]))
+        callback.start()
+        callback.join(timeout=10)
+        assert not callback.is_alive(), "keeping a view waits for the writer"
+        assert read_recording(files(tmp_path)[0]).views == []
+    recorder.flush()
+    assert len(read_recording(files(tmp_path)[0]).views) == 1
+
+    recorder.max_bytes = 1  # full: the next write rotates, carrying the buffered view
+    with lock:
+        late = threading.Thread(target=recorder.view_input, args=(kept[0], "mask", view_messages(0).mask))
+        late.start()
+        late.join(timeout=10)
+        assert not late.is_alive(), "recording a late input under the buffer's lock waits for that lock"
+    recorder.flush()
+    recorder.close()
+    first, second = files(tmp_path)
+    assert [view.carried for view in read_recording(second).buffered] == [True]
+    assert [event["event"] for event in read_recording(second).events][-1] == "input"

@@ -1,11 +1,12 @@
-"""The inputs of a data-set evaluation: rosbag2 bags and the official ID-Pose data layout.
+"""The inputs of a data-set evaluation: rosbag2 bags, flight recordings and the official ID-Pose data layout.
 
-Both kinds plan ``EstimateTask``s (the protocol's unit of work) and hand out their views decoded, as the
+Every kind plans ``EstimateTask``s (the protocol's unit of work) and hand out their views decoded, as the
 ``ViewInput``s the estimators take, so every input goes through the same estimator code. A bag's picks are
 drawn as ``evaluate_bag`` draws them; the official layout's samples JSON fixes them instead:
 ``{"data_root": "data/omni3d/", "samples": [{"name": <object>, "anchor_vid": 94, "target_vids": [15, 25]}]}``
 with ``<data_root>/<object>/images/<vid>.png`` (RGBA, alpha = object mask) and ``poses/<vid>.npy``
-(4x4 camera-to-world, OpenGL camera axes, world up +z, object at the origin).
+(4x4 camera-to-world, OpenGL camera axes, world up +z, object at the origin). A flight recording
+(``recording_input``) plans one estimate per result the node published, and gives that result too.
 """
 from __future__ import annotations
 
@@ -20,10 +21,12 @@ import numpy as np
 
 from idpose_core.evaluation.protocol import EstimateTask, EvaluationProtocol, tasks_for_picks
 from idpose_core.view_input import ViewInput
+from idpose_ros.dataset.recording_input import RecordingInput, recordings_in
 from idpose_ros.evaluation.bag_evaluation import plan_bag
 from idpose_ros.evaluation.bag_io import BagError
 from idpose_ros.evaluation.bag_views import BagViews, load_views
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views, require_usable
+from idpose_ros.evaluation.recording import is_recording
 
 PNG_TO_RGB = {1: cv2.COLOR_GRAY2RGB, 3: cv2.COLOR_BGR2RGB, 4: cv2.COLOR_BGRA2RGB}
 
@@ -34,7 +37,7 @@ class InputError(Exception):
 
 class DatasetInput(Protocol):
     """One object's posed views: ``name`` identifies it in results.jsonl (a resolved path), ``dataset`` is the
-    group the report scores it in, ``kind`` is "bag" or "official"."""
+    group the report scores it in, ``kind`` is "bag", "recording" or "official"."""
 
     name: str
     dataset: str
@@ -46,6 +49,11 @@ class DatasetInput(Protocol):
 
     def views(self, view_ids: set[int]) -> tuple[dict[int, ViewInput], dict[int, str]]:
         """These views decoded, with the other inputs a bag holds; and why any of them could not be."""
+        ...
+
+    def published(self, task: EstimateTask) -> dict[str, tuple[list[dict[str, Any]], dict[str, Any]]]:
+        """Answers the input itself holds for this task (a recording's published result), scored: method ->
+        (pair records, row); empty for views that come without answers."""
         ...
 
     def summary(self) -> dict[str, Any]:
@@ -71,6 +79,9 @@ class BagInput:
 
     def views(self, view_ids: set[int]) -> tuple[dict[int, ViewInput], dict[int, str]]:
         return load_views(self.path, self.ground_truth.image_topic, view_ids, self.bag_views, self.ground_truth.inputs)
+
+    def published(self, task: EstimateTask) -> dict[str, tuple[list[dict[str, Any]], dict[str, Any]]]:
+        return {}
 
     def summary(self) -> dict[str, Any]:
         views = self.bag_views
@@ -131,6 +142,9 @@ class OfficialInput:
     def views(self, view_ids: set[int]) -> tuple[dict[int, ViewInput], dict[int, str]]:
         return {v: read_png_view(self.images[v]) for v in view_ids}, {}
 
+    def published(self, task: EstimateTask) -> dict[str, tuple[list[dict[str, Any]], dict[str, Any]]]:
+        return {}
+
     def summary(self) -> dict[str, Any]:
         return {"views": len(self.images), "usable": len(set(self.images) & set(self.poses)), "skipped": 0}
 
@@ -164,7 +178,8 @@ def expand_paths(patterns: Sequence[str]) -> list[Path]:
 
 
 def open_inputs(patterns: Sequence[str], ground_truth: GroundTruthOptions) -> list[DatasetInput]:
-    """Every input the arguments name: a ``.json`` is an official samples file, anything else a bag.
+    """Every input the arguments name: a ``.json`` is an official samples file, a flight recorder's ``.mcap`` a
+    recording, a folder without metadata.yaml that holds recordings each of them, anything else a bag.
 
     Raises ``InputError`` or ``BagError`` naming the first input that cannot be evaluated.
     """
@@ -172,11 +187,14 @@ def open_inputs(patterns: Sequence[str], ground_truth: GroundTruthOptions) -> li
     for path in expand_paths(patterns):
         if path.suffix == ".json":
             inputs += read_official_samples(path)
-        else:
+            continue
+        recordings = ([path] if is_recording(path) else recordings_in(path)
+                      if path.is_dir() and not (path / "metadata.yaml").exists() else [])
+        for source in recordings or [path]:
             try:
-                inputs.append(BagInput(path, ground_truth))
+                inputs.append(RecordingInput(source, ground_truth) if recordings else BagInput(source, ground_truth))
             except BagError as err:
-                raise BagError(f"{path}: {err}") from None
+                raise BagError(f"{source}: {err}") from None
     names = [item.name for item in inputs]
     repeated = sorted({name for name in names if names.count(name) > 1})
     if repeated:

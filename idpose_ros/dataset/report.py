@@ -3,7 +3,8 @@
 The per-estimate lines of results.jsonl are merged in plan order (not in the order they finished), so a
 resumed run writes the report an uninterrupted one writes. Metrics per data set and n, as the paper's
 Table 1, beside the random-pose baseline on the same pairs (``random_baseline``, seeded per estimate as
-``evaluate_bag`` seeds it) and the classical baselines that ran, with the failed estimates counted and listed.
+``evaluate_bag`` seeds it), the classical baselines that ran and, for flight recordings, the results the node
+published (``LIVE_METHOD``), with the failed estimates counted and listed.
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_ros.dataset.inputs import DatasetInput  # noqa: E402
 from idpose_ros.dataset.results import Key, task_key  # noqa: E402
 from idpose_ros.evaluation.bag_report import RANDOM_METHOD, markdown_table, model_name, summary_table  # noqa: E402
+from idpose_ros.evaluation.recording import LIVE_METHOD  # noqa: E402
 
 ALL = "all data sets"
 
@@ -132,7 +134,7 @@ def write_dataset_report(out: Path, evaluation: DatasetEvaluation) -> str:
         heading = (f"## {dataset}\n\n{len(inputs)} input{'s' if len(inputs) != 1 else ''}, "
                    f"{sum(item['succeeded'] for item in inputs)} estimates, {failed} failed.\n\n")
         sections.append(heading + (markdown_table({method: scores["aggregates"],
-                                                   **{TITLES[name]: aggregates
+                                                   **{TITLES.get(name, name): aggregates
                                                       for name, aggregates in scores["baselines"].items()},
                                                    RANDOM_METHOD: scores["random_baseline"]["aggregates"]})
                                    if scores else "No estimate succeeded."))
@@ -143,12 +145,16 @@ def write_dataset_report(out: Path, evaluation: DatasetEvaluation) -> str:
     failures = "".join(f"- `{f['input']}` sample {f['sample']}, n = {f['n']}, views {f['views']} "
                        f"({f['attempts']} attempts): {f['error']}\n" for f in run.failures)
     protocol = about["protocol"]
+    recordings_note = (f"Flight recordings: each published result on its own views, estimated again and scored as "
+                       f"the node published it (`{LIVE_METHOD}`). "
+                       if any(item["kind"] == "recording" for item in run.inputs) else "")
     markdown = (
         "# Pose evaluation of a data set\n\n"
         f"{method}, mode {about['mode']}, model {model_name(about['model'])}, solver preset "
         f"{about['node_parameters']['solver_preset']}. Bags: {protocol['samples']} seeded pick(s) of up to 8 views "
         f"(seed {protocol['seed']}); official samples: their fixed views. Each is evaluated on its first "
         f"{', '.join(map(str, protocol['view_counts']))} views; the first view is the anchor. "
+        + recordings_note +
         f"Estimates: {counts['planned']} planned, {counts['succeeded']} succeeded, {counts['failed']} failed "
         f"(after a retry)" + (f", {counts['missing']} not run yet" if counts["missing"] else "") + ".\n\n"
         + "\n\n".join(sections) + "\n\n"

@@ -36,7 +36,8 @@ def line_key(line: dict[str, Any]) -> Key:
 
 
 def result_line(item: DatasetInput, result: JobResult, solver_seed: int) -> dict[str, Any]:
-    """The results.jsonl line of a finished estimate: which one, its seeds, and its poses and errors or its error."""
+    """The results.jsonl line of a finished estimate: which one, its seeds, and its poses and errors or its error;
+    the classical baselines' and the input's own answers (a recording's published result) beside them."""
     task = result.task
     line = {"input": item.name, "dataset": item.dataset, "kind": item.kind, "sample": task.sample, "n": task.n,
             "views": list(task.pick[:task.n]), "status": "failed" if result.outcome is None else "ok",
@@ -49,7 +50,8 @@ def result_line(item: DatasetInput, result: JobResult, solver_seed: int) -> dict
             "object_distance": row["object_distance"], "true_c2w": task.true_c2w[:task.n].tolist(),
             "predicted_c2w": result.outcome.predicted_c2w.tolist(), "pairs": result.outcome.records,
             "baselines": {name: {"pairs": records, "row": baseline_row}
-                          for name, (records, baseline_row) in result.outcome.baselines.items()}}
+                          for name, (records, baseline_row) in {**result.outcome.baselines,
+                                                                 **item.published(task)}.items()}}
 
 
 class ResultsLog:

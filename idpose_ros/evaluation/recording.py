@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -81,20 +81,55 @@ def recorded_tasks(recording: Recording, views: BagViews, ground_truth: GroundTr
     return tasks, live, left_out
 
 
-class LiveEstimates:
-    """The results the node published, handed out in task order as if estimated again."""
+class _Published:
+    """The result the node published, handed to ``run_estimate`` as if estimated again."""
 
     description = {"mode": "live"}
+    values: dict = {}
 
-    def __init__(self, estimates: Sequence[ViewSetEstimate], values: dict) -> None:
-        self._estimates, self.values = list(estimates), values
+    def __init__(self, estimate: ViewSetEstimate) -> None:
+        self._estimate = estimate
 
     def __call__(self, views: Sequence[ViewInput], anchor_polar_deg: float, object_distance: float,
                  progress=None) -> ViewSetEstimate:
-        return self._estimates.pop(0)
+        return self._estimate
 
     def close(self) -> None:
         """Nothing to release."""
+
+
+def live_outcome(task: EstimateTask, estimate: ViewSetEstimate) -> tuple[list[dict], dict]:
+    """(pair records, row) of the published ``estimate`` scored as ``run_estimate`` scores a fresh one."""
+    outcome = run_estimate(_Published(estimate), task, [])
+    return outcome.records, outcome.row
+
+
+@dataclass
+class RecordedEstimates:
+    """A flight recording opened for evaluation: its ground truth on the recorded topics, its views, one task per
+    scorable recorded result with that result (``live``, in task order), and why any other result is left out."""
+
+    path: Path
+    ground_truth: GroundTruthOptions
+    views: BagViews
+    tasks: list[EstimateTask]
+    live: list[ViewSetEstimate]
+    left_out: list[str]
+
+
+def open_recording(path: Path, ground_truth: GroundTruthOptions, seed: int) -> RecordedEstimates:
+    """Read a recording's views, ground truth and results; BagError when it cannot be read or has no end."""
+    try:
+        recording = read_recording(path)
+    except (RecordingUnreadable, ValueError) as err:
+        raise BagError(f"{str(path)!r} is not a readable flight recording: {err}") from None
+    if not recording.scan.sealed:
+        raise BagError(f"{str(path)!r} has no end (the node was killed while recording): start the node on its "
+                       "record_dir once, which seals it")
+    gt = recording_ground_truth(recording, ground_truth)
+    views = _with_gravity(read_views(path, gt), recording)
+    tasks, live, left_out = recorded_tasks(recording, views, gt, seed)
+    return RecordedEstimates(Path(path), gt, views, tasks, live, left_out)
 
 
 def evaluate_recording(path: Path, estimator, ground_truth: GroundTruthOptions | None = None,
@@ -103,32 +138,23 @@ def evaluate_recording(path: Path, estimator, ground_truth: GroundTruthOptions |
     BagError when the recording cannot be read or no result can be scored."""
     started = time.perf_counter()
     protocol = protocol or EvaluationProtocol()
-    try:
-        recording = read_recording(path)
-    except (RecordingUnreadable, ValueError) as err:
-        raise BagError(f"{str(path)!r} is not a readable flight recording: {err}") from None
-    if not recording.scan.sealed:
-        raise BagError(f"{str(path)!r} has no end (the node was killed while recording): start the node on its "
-                       "record_dir once, which seals it")
-    gt = recording_ground_truth(recording, ground_truth or GroundTruthOptions())
-    views = _with_gravity(read_views(path, gt), recording)
-    tasks, live, left_out = recorded_tasks(recording, views, gt, protocol.seed)
+    recorded = open_recording(path, ground_truth or GroundTruthOptions(), protocol.seed)
+    tasks, gt = recorded.tasks, recorded.ground_truth
     if not tasks:
-        reasons = "; ".join(left_out) or "it holds no published result"
+        reasons = "; ".join(recorded.left_out) or "it holds no published result"
         raise BagError(f"no recorded estimate of {str(path)!r} can be scored: {reasons}")
     run = BagEvaluation(**Evaluation.planned(tasks, protocol, estimator), bag=Path(path), ground_truth=gt,
-                        views=views)
+                        views=recorded.views)
     used = {v for task in tasks for v in task.pick}
-    decoded, unusable = load_views(path, gt.image_topic, used, views, gt.inputs)
+    decoded, unusable = load_views(path, gt.image_topic, used, recorded.views, gt.inputs)
     evaluate_tasks(run, estimator, tasks, decoded, unusable, show_progress, name="evaluate_bag")
-    for reason in left_out:
+    for reason in recorded.left_out:
         print(f"evaluate_bag: left out {reason}", file=sys.stderr)
-    replay = LiveEstimates([estimate for task, estimate in zip(tasks, live) if all(v in decoded for v in task.views)],
-                           {})
-    for task in (task for task in tasks if all(v in decoded for v in task.views)):
-        outcome = run_estimate(replay, task, [decoded[v] for v in task.views])
-        run.baseline_records.setdefault(LIVE_METHOD, []).extend(outcome.records)
-        run.baseline_estimates.setdefault(LIVE_METHOD, []).append(outcome.row)
+    for task, estimate in zip(tasks, recorded.live):
+        if all(v in decoded for v in task.views):
+            records, row = live_outcome(task, estimate)
+            run.baseline_records.setdefault(LIVE_METHOD, []).extend(records)
+            run.baseline_estimates.setdefault(LIVE_METHOD, []).append(row)
     run.baselines = (*run.baselines, LIVE_METHOD)
     run.seconds = time.perf_counter() - started
     return run

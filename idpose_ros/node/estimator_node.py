@@ -395,6 +395,7 @@ class EstimatorNode(LifecycleNode):
             response.success, response.message = False, str(exc)
             return response
         self._kept(view, count, node_settings(current_values(self)))
+        self._recorder.flush()  # a view the answer names is in the recording
         response.success, response.message = True, f"captured view {count} ({view.source}{view_inputs_text(view)})"
         return response
 
@@ -502,6 +503,8 @@ class EstimatorNode(LifecycleNode):
 
     # ----- estimation ----------------------------------------------------------------------------------------------
     def _buffered_views(self) -> list[View]:
+        """The views an estimate of the buffer takes, each in the recording before anyone hears of the estimate."""
+        self._recorder.flush()
         views = self._buffer.snapshot()
         if len(views) < 2:
             raise EstimateRefused(EstimatePoses.Result.INVALID_GOAL,
@@ -626,6 +629,7 @@ class EstimatorNode(LifecycleNode):
                 recording=self._recorder.status())
 
     def _publish_diagnostics(self) -> None:
+        self._recorder.flush()  # the views it counts are in the recording
         hardware_id = f"{self.get_fully_qualified_name()} ({node_settings(current_values(self)).device})"
         self._diagnostics_pub.publish(diagnostic_array(self.status(), hardware_id, self.get_clock().now().to_msg()))
 

@@ -3,15 +3,20 @@
 One file per session (``idpose_<start time>_<segment>.mcap``), rotated to a new segment when it
 reaches ``record_max_bytes``; a new segment (and a resumed session) begins with the views the
 buffer holds, so the newest file alone holds what the buffer held. Every message is flushed as it
-is written (``mcap_log``). At start, the newest file is read: a killed one is sealed (the record
-it left half written cut off) and, with ``resume``, its views kept since the last ``~/reset`` are
-given back to the buffer; one that cannot be read is renamed ``<name>.refused`` and the node starts
-empty. A write that fails (a full disk) stops the recording with one error; nothing here raises
-into the node, so an estimate never fails because of the recorder.
+is written (``mcap_log``), by one writer thread in call order: keeping a view only queues it (the
+image callback does not wait for the disk), while ``result``, ``event`` and ``flush`` return once
+everything queued before them is in the file, so whatever the node tells a client about (a captured
+view, a reset, a result) is recorded before the answer; at most ``MAX_QUEUED`` writes wait. At
+start, the newest file is read: a killed one is sealed (the record it left half written cut off)
+and, with ``resume``, its views kept since the last ``~/reset`` are given back to the buffer; one
+that cannot be read is renamed ``<name>.refused`` and the node starts empty. A write that fails (a
+full disk) stops the recording with one error; nothing here raises into the node, so an estimate
+never fails because of the recorder.
 """
 from __future__ import annotations
 
 import importlib
+import queue
 import threading
 import time
 from collections.abc import Callable
@@ -35,11 +40,12 @@ PATTERN = "idpose_*.mcap"
 TF_TOPICS = ("/tf", "/tf_static")  # recorded beside the views where tf2_msgs is installed: the ground truth
 REFUSED_SUFFIX = ".refused"
 MAX_CHAIN = 16  # earlier files looked at when the newest ones end while carrying views over
+MAX_QUEUED = 4  # writes waiting for the writer thread; beyond it a call waits (bounded memory on a slow disk)
 
 
 @dataclass
 class WriteCost:
-    """What recording kept views cost: their count, total bytes and total seconds."""
+    """What recording kept views cost the writer thread: their count, total bytes and total seconds."""
 
     views: int = 0
     bytes: int = 0
@@ -93,6 +99,9 @@ class FlightRecorder:
         self.problem = ""  # why the recording stopped
         self.resumed = ""  # what the start found in record_dir
         self.cost = WriteCost()
+        self._queue: queue.Queue = queue.Queue(maxsize=MAX_QUEUED)
+        self._thread: threading.Thread | None = None
+        self._submitting = threading.Lock()  # a write is queued before close's end marker, or not at all
 
     @property
     def on(self) -> bool:
@@ -114,6 +123,9 @@ class FlightRecorder:
         views = self._restore(previous) if previous is not None else []
         with self._lock:
             self._open({**session, "resumed_from": previous.path.name if previous else None}, views)
+        if self._writer is not None:
+            self._thread = threading.Thread(target=self._drain, name="flight_recorder", daemon=True)
+            self._thread.start()
         return views
 
     def _previous(self) -> Recording | None:
@@ -187,15 +199,42 @@ class FlightRecorder:
             return
         self._info(f"recording to {path}")
 
-    def _write(self, what: Callable[[RecordingWriter], int], carry: int | None = None) -> int:
-        """Run one write (rotating first when the file is full, carrying the first ``carry`` buffered views, all
-        when None); any failure stops the recording."""
+    def _submit(self, what: Callable[[RecordingWriter], int] | None, carry: int | None = None, wait: bool = False,
+                cost: bool = False, snapshot: bool = True) -> None:
+        """Queue one write for the writer thread with the buffered views it would carry into a new segment: the
+        first ``carry`` (all when None) as the buffer holds them now, or, without ``snapshot`` (a caller holding
+        the buffer's lock), those of the write before. With ``wait``, return once it is written (``what`` None:
+        once everything before it is)."""
+        done = threading.Event() if wait else None
+        with self._submitting:
+            if self._thread is None or self._writer is None:
+                return
+            self._queue.put((what, self._buffered()[:carry] if snapshot else None, cost, done))
+        if done is not None:
+            done.wait()
+
+    def _drain(self) -> None:
+        """The writer thread: every queued write in order, until ``close`` queues None."""
+        carry: list[View] = []
+        while (item := self._queue.get()) is not None:
+            what, views, cost, done = item
+            carry = carry if views is None else views
+            started = time.perf_counter()
+            written = self._write(what, carry) if what is not None else 0
+            if cost and written:
+                self.cost.add(written, time.perf_counter() - started)
+            if done is not None:
+                done.set()
+
+    def _write(self, what: Callable[[RecordingWriter], int], carry: list[View]) -> int:
+        """Run one write (rotating first when the file is full, carrying ``carry``); any failure stops the
+        recording."""
         with self._lock:
             if self._writer is None:
                 return 0
             try:
                 if self._writer.size >= self.max_bytes:
-                    self._rotate(self._buffered()[:carry])
+                    self._rotate(carry)
                 return what(self._writer) if self._writer is not None else 0
             except Exception as err:  # a full disk or anything else: the node goes on without recording
                 self._stop(f"writing {self._writer.path if self._writer else self.directory}: "
@@ -218,33 +257,41 @@ class FlightRecorder:
         self._error(self.problem)
 
     def view_kept(self, index: int, view: View) -> None:
-        """Kept view ``index`` (1 = the anchor), with the messages it was made from."""
-        if view.received is None:
-            return
-        started = time.perf_counter()
-        written = self._write(lambda writer: writer.view(index, view.received), carry=index - 1)
-        if written:
-            self.cost.add(written, time.perf_counter() - started)
+        """Kept view ``index`` (1 = the anchor), with the messages it was made from: queued (``flush`` waits for
+        it)."""
+        if view.received is not None:
+            self._submit(lambda writer: writer.view(index, view.received), carry=index - 1, cost=True)
 
     def view_input(self, view: View, kind: str, message: object) -> None:
-        """A depth or mask image that reached a kept view after it was kept."""
-        self._write(lambda writer: writer.view_input(stamp_nanoseconds(view.stamp), kind, message))
+        """A depth or mask image that reached a kept view after it was kept (called under the buffer's lock):
+        queued."""
+        self._submit(lambda writer: writer.view_input(stamp_nanoseconds(view.stamp), kind, message), snapshot=False)
 
     def result(self, result: EstimatePoses.Result, settings: dict[str, Any], views: list[View]) -> None:
-        """A published estimate and the parameter values it ran on."""
+        """A published estimate and the parameter values it ran on, written (after its views) when this returns."""
         stamps = [stamp_nanoseconds(view.stamp) for view in views]
-        self._write(lambda writer: writer.result(result, settings, stamps))
+        self._submit(lambda writer: writer.result(result, settings, stamps), wait=True)
 
     def other(self, topic: str, message: object) -> None:
-        """A message of another topic (/tf, /tf_static), recorded as received."""
-        self._write(lambda writer: writer.other(topic, message))
+        """A message of another topic (/tf, /tf_static), recorded as received: queued."""
+        self._submit(lambda writer: writer.other(topic, message))
 
     def event(self, name: str, **fields: Any) -> None:
-        """``reset``, ``cancel``, ...: a JSON event."""
-        self._write(lambda writer: writer.event(name, **fields))
+        """``reset``, ``cancel``, ...: a JSON event, written when this returns."""
+        self._submit(lambda writer: writer.event(name, **fields), wait=True)
+
+    def flush(self) -> None:
+        """Return once everything queued so far is in the file (before answering a client about a kept view)."""
+        self._submit(None, wait=True)
 
     def close(self) -> None:
-        """Write the file's summary and close it (a clean shutdown)."""
+        """Write what is queued, then the file's summary, and close it (a clean shutdown)."""
+        with self._submitting:
+            thread, self._thread = self._thread, None
+            if thread is not None:
+                self._queue.put(None)
+        if thread is not None:
+            thread.join()
         with self._lock:
             if self._writer is not None:
                 try:
