@@ -23,6 +23,7 @@ ROS_PACKAGES = {
     "diagnostic_msgs": "common_interfaces", "ament_index_python": "ament_index", "launch": "launch",
     "launch_ros": "launch_ros", "action_msgs": "rcl_interfaces", "ament_cmake": "ament_cmake",
     "rosidl_default_generators": "rosidl_defaults", "rosidl_default_runtime": "rosidl_defaults",
+    "lifecycle_msgs": "rcl_interfaces", "tf2_ros": "geometry2",
 }
 # Packages of this repository, built in the same workspace: name -> folder.
 WORKSPACE_PACKAGES = {"idpose_interfaces": ROOT / "idpose_interfaces"}
@@ -38,9 +39,10 @@ PROVIDED_BY = {
     "numpy": "python3-numpy", "cv2": "python3-opencv", "tqdm": "python3-tqdm", "matplotlib": "python3-matplotlib",
     "torch": "python3-torch", "transformers": "python3-transformers-pip", "rosbags": "python3-rosbags-pip",
     "pybullet": "python3-pybullet-pip", "pybullet_data": "python3-pybullet-pip", "diffusers": None,
-    "safetensors": None, "ray": None, "pycolmap": None, **{name: name for name in [*ROS_PACKAGES, *WORKSPACE_PACKAGES]},
+    "safetensors": None, "ray": None, "pycolmap": None, "mcap": None, **{name: name for name in [*ROS_PACKAGES, *WORKSPACE_PACKAGES]},
 }
-REQUIREMENT_OF = {"diffusers": "diffusers", "safetensors": "safetensors", "ray": "ray", "pycolmap": "pycolmap"}
+REQUIREMENT_OF = {"diffusers": "diffusers", "safetensors": "safetensors", "ray": "ray", "pycolmap": "pycolmap",
+                  "mcap": "mcap"}
 OWN = {"idpose_core", "idpose_ros", "msg_adapters"}
 
 
