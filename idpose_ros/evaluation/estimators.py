@@ -49,7 +49,7 @@ class EstimatorOptions:
         """The node's parameter values that shape an estimate: the solver's (the preset, the variant and
         the overrides) and ``image_size``; both modes run on exactly these. ValueError names a bad one."""
         config = SolverConfig.preset(self.preset)
-        values = {name: getattr(config, name) for name in SOLVER_PARAMETERS}
+        values = {"preset": self.preset, **{name: getattr(config, name) for name in SOLVER_PARAMETERS}}
         if self.variant is not None:
             values["variant"] = self.variant
         for item in self.solver_params:
