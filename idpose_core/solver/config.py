@@ -101,7 +101,9 @@ class SolverConfig:
     def preset(cls, name: str, **overrides) -> SolverConfig:
         """Named settings (``PRESETS``), then overrides; all of them count as chosen.
 
-        "default": the paper's. "fast": a leaner ID-Pose schedule (``bench/README.md``, the fast preset).
+        "default": the paper's. "fast": the paper's grid probed with 2 noises, the best 4 candidates adjusted,
+        3 kept, 50 refinement steps per view, the runner-up polished only when it probes close
+        (``bench/README.md``, the frontier).
         "ifusion": iFusion's pose search (chinhsuanwu/ifusion, ``optimize_pose_loop``, ``config/main.yaml``):
         4 starts at azimuth 0, 90, 180, -90 deg, 100 Adam steps each at lr 0.1 with plateau decay (factor
         0.6, patience 10), both directions per step, the timestep annealed from 1000 to 0; each view against
@@ -187,6 +189,7 @@ class SolverConfig:
 # Named settings of ``SolverConfig.preset``; the evidence for each is in ``bench/README.md``.
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    "fast": dict(probe_batch=4, keep_top=3, refine_steps_per_view=100, runner_up_steps=30),
+    "fast": dict(probe_batch=2, adjust_top=4, keep_top=3, refine_steps_per_view=50, runner_up_steps=30,
+                 runner_up_gate=0.3),
     "ifusion": dict(search="starts", variant="naive", probe_batch=4, refine_steps_per_view=0, runner_up_steps=0),
 }
