@@ -2,9 +2,9 @@
 """The accuracy-cost frontier of the solver's schedules: one table, one row per schedule.
 
 Per row: predictor samples per estimate (the solver's counters on one render-oracle scene, no anchor polar
-angle known, so 5 polar candidates), seconds per estimate with the embedded demo model (on the demo bags), the projected full-size seconds (``bench/unit_costs.py``, float32 and
-bfloat16) and RotAcc@15/30 and the median rotation error on three sets: fresh demo-object bags (camera
-seed ``--seed``), the render oracle (``bench/solver_oracle.py``'s scenes, its learning rates) and rolled
+angle known, so 5 polar candidates), seconds per estimate with the embedded demo model (on the demo
+bags), the projected full-size seconds (``bench/unit_costs.py``, float32 and bfloat16) and RotAcc@15/30
+and the median rotation error on three sets: fresh demo-object bags (camera seed ``--seed``), the render oracle (``bench/solver_oracle.py``'s scenes, its learning rates) and rolled
 bags (up to 45 deg) estimated with their Imu gravity. The bags are evaluated with ``evaluate_bag``.
 ``--rows`` picks rows (``ROWS`` and the cost levers ``LEVERS``); prints the table, writes
 bench/results/frontier.json (or ``--out``).
