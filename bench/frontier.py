@@ -1,15 +1,16 @@
 #!/usr/bin/env python3
 """The accuracy-cost frontier of the solver's schedules: one table, one row per schedule.
 
-Per row: predictor samples per estimate (the solver's counters on one render-oracle scene, no anchor polar
-angle known, so 5 polar candidates), seconds per estimate with the embedded demo model (on the demo
-bags), the projected full-size seconds (``bench/unit_costs.py``, float32 and bfloat16) and RotAcc@15/30
-and the median rotation error on three sets: fresh demo-object bags (camera seed ``--seed``), the render oracle (``bench/solver_oracle.py``'s scenes, its learning rates) and rolled
-bags (up to 45 deg) estimated with their Imu gravity. The bags are evaluated with ``evaluate_bag``.
-``--rows`` picks rows (``ROWS`` and the cost levers ``LEVERS``); prints the table, writes
-bench/results/frontier.json (or ``--out``).
+Per row: predictor samples per estimate (the solver's counters on one render-oracle scene, no anchor
+polar angle known, so 5 polar candidates), seconds per estimate with the embedded demo model (on the
+demo bags), the projected full-size seconds (``bench/unit_costs.py``, float32 and bfloat16), and
+RotAcc@15/30 and the median rotation error on three sets: fresh demo-object bags (camera seed
+``--seed``), the render oracle (``bench/solver_oracle.py``'s scenes, its learning rates) and rolled
+bags (up to 45 deg) estimated with their Imu gravity; the bags are evaluated with ``evaluate_bag``.
+``--rows`` picks rows (``ROWS`` and the cost levers ``LEVERS``), ``--bag-rows`` those also run on the
+bags; prints the table, writes bench/results/frontier.json (or ``--out``).
 
-    python bench/frontier.py [--pairs 1] [--oracle-objects 12] [--rows default fast ifusion]
+    python bench/frontier.py [--pairs 1] [--objects 6] [--oracle-objects 12] [--rows default fast ifusion]
 """
 from __future__ import annotations
 
