@@ -189,7 +189,7 @@ class SolverConfig:
 # Named settings of ``SolverConfig.preset``; the evidence for each is in ``bench/README.md``.
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    "fast": dict(probe_batch=2, adjust_top=4, keep_top=3, refine_steps_per_view=50, runner_up_steps=30,
+    "fast": dict(probe_batch=2, adjust_top=4, keep_top=3, refine_steps_per_view=50, runner_up_steps=20,
                  runner_up_gate=0.3),
     "ifusion": dict(search="starts", variant="naive", probe_batch=4, refine_steps_per_view=0, runner_up_steps=0),
 }
