@@ -13,12 +13,10 @@ from idpose_core.evaluation.picks import PICK_SIZE
 from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.gravity import rotation_from_extrinsic
 from idpose_core.model_loading import PRECISIONS
-from idpose_core.solver.config import VARIANTS
+from idpose_core.solver.config import PRESETS, VARIANTS
 from idpose_ros.evaluation.bag_views import ExtraTopics
 from idpose_ros.evaluation.estimators import MODES, EstimatorOptions
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions
-
-PRESETS = ("default", "fast")
 
 
 def add_estimator_arguments(parser: argparse.ArgumentParser, preset: str = EstimatorOptions.preset) -> None:
@@ -31,7 +29,7 @@ def add_estimator_arguments(parser: argparse.ArgumentParser, preset: str = Estim
                        help="Zero-1-to-3 diffusers folder or .ckpt (default: the embedded demo model)")
     group.add_argument("--device", choices=("auto", "cpu", "cuda"), default=default.device)
     group.add_argument("--precision", choices=tuple(PRECISIONS), default=default.precision)
-    group.add_argument("--preset", choices=PRESETS, default=preset, help=f"solver preset ({preset})")
+    group.add_argument("--preset", choices=tuple(PRESETS), default=preset, help=f"solver preset ({preset})")
     group.add_argument("--variant", choices=VARIANTS, default=default.variant, help="solver variant")
     group.add_argument("--solver-param", action="append", default=list(default.solver_params), metavar="NAME=VALUE",
                        help="override one of the node's solver parameters (repeatable)")

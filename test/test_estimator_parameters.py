@@ -100,3 +100,27 @@ def test_an_invalid_override_at_start_up_names_the_problem(ros_context):
             declare_parameters(node)
     finally:
         node.destroy_node()
+
+
+def test_setting_a_preset_sets_the_exposed_solver_parameters_and_the_rest_comes_from_it(node):
+    assert node.set_parameters([Parameter("preset", value="ifusion")])[0].successful
+    ifusion = SolverConfig.preset("ifusion")
+    assert all(node.get_parameter(name).value == getattr(ifusion, name) for name in SOLVER_PARAMETERS)
+    config = solver_config({name: node.get_parameter(name).value for name, _, _ in parameter_table()})
+    assert config.search == "starts" and config.start_steps == ifusion.start_steps
+    # a solver parameter set in the same call as the preset wins over the preset's value
+    assert node.set_parameters_atomically([Parameter("preset", value="fast"),
+                                           Parameter("probe_batch", value=8)]).successful
+    assert node.get_parameter("probe_batch").value == 8
+    assert node.get_parameter("refine_steps_per_view").value == SolverConfig.preset("fast").refine_steps_per_view
+    assert solver_config({name: node.get_parameter(name).value for name, _, _ in parameter_table()}).search == "grid"
+    assert not node.set_parameters([Parameter("preset", value="slow")])[0].successful
+
+
+def test_a_preset_given_at_start_up_sets_the_solver_parameters(ros_context):
+    node = Node("preset_at_start", context=ros_context, parameter_overrides=[Parameter("preset", value="fast")])
+    try:
+        declare_parameters(node)
+        assert node.get_parameter("keep_top").value == SolverConfig.preset("fast").keep_top
+    finally:
+        node.destroy_node()

@@ -16,6 +16,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from idpose_core.evaluation.protocol import EvaluationProtocol
+from idpose_core.solver import SolverConfig
 from idpose_core.synthetic.render_oracle import IdentifyingOracle
 from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_ros import evaluate_bag
@@ -135,7 +136,7 @@ def test_an_estimate_names_its_views_whose_masks_touch_the_border():
 def test_node_values_follow_the_node_parameters():
     values = node_values("fast", "naive", ["refine_steps_per_view=7", "adjust_lr=0.5"])
     assert values["variant"] == "naive" and values["refine_steps_per_view"] == 7 and values["adjust_lr"] == 0.5
-    assert values["probe_batch"] == 4  # from the fast preset
+    assert values["probe_batch"] == SolverConfig.preset("fast").probe_batch and values["preset"] == "fast"
     with pytest.raises(ValueError, match="expected NAME=VALUE"):
         node_values("default", None, ["probe_t=0.3"])  # not a node parameter
     with pytest.raises(ValueError, match="takes a int"):

@@ -73,7 +73,9 @@ def test_chosen_settings_are_tracked_through_updates_and_unknown_names_refused()
     config = SolverConfig(seed=3).updated(probe_batch=2)
     assert config.chosen == {"seed", "probe_batch"} and (config.seed, config.probe_batch) == (3, 2)
     assert config.updated(seed=4).seed == 4  # a chosen setting can be changed again
-    assert SolverConfig.preset("fast").chosen == {"probe_batch", "keep_top", "refine_steps_per_view", "runner_up_steps"}
+    assert SolverConfig.preset("fast").chosen == {"probe_batch", "adjust_top", "keep_top", "refine_steps_per_view",
+                                                  "runner_up_steps", "runner_up_gate"}
+    assert SolverConfig.preset("ifusion", variant="tr").chosen >= {"search", "variant"}
     with pytest.raises(TypeError, match="no settings \\['probe_time'\\]"):
         SolverConfig(probe_time=0.5)
 

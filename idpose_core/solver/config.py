@@ -10,6 +10,7 @@ import numpy as np
 
 VARIANTS = ("full", "tr", "naive")
 KNOWN_POLAR_MODES = ("fixed", "start")
+SEARCHES = ("grid", "starts")
 DEFAULT_POLAR_CANDIDATES_DEG = (-120.0, -60.0, 0.0, 60.0, 120.0)
 ANCHOR_POLAR_STEP_DEG = 45.0
 
@@ -34,6 +35,15 @@ class SolverConfig:
     says what happens to a view's relative polar angle when gravity gives it (``estimate_poses``'s
     ``known_polar``): "fixed" explores and refines azimuth and radius only, "start" explores at the known
     polar angle and lets refinement move it.
+
+    ``search`` says how start poses are found: "grid" (ID-Pose: probe a candidate grid, adjust the
+    better ``adjust_top`` of them, keep the best) or "starts" (iFusion: Adam from each of
+    ``start_azimuths_deg`` for ``start_steps`` steps, both directions in one batch, the timestep annealed
+    linearly over ``start_t_range``; the start with the smallest summed loss wins;
+    ``idpose_core.solver.starts``). ``refine_stop_deg`` / ``refine_stop_steps`` end refinement early
+    once no pose moved more than that angle over that many steps (0 = never); ``runner_up_gate`` polishes
+    the runner-ups only when some view's best far candidate probes within that share of the error
+    spread of its answer (None = always).
     """
 
     variant: str = "full"
@@ -56,6 +66,18 @@ class SolverConfig:
     ambiguity_deg: float = 30.0
     ambiguity_margin: float = 0.1
     known_polar: str = "fixed"
+    adjust_top: int | None = None
+    refine_stop_deg: float = 0.0
+    refine_stop_steps: int = 0
+    runner_up_gate: float | None = None
+    search: str = "grid"
+    start_azimuths_deg: tuple[float, ...] = (0.0, 90.0, 180.0, -90.0)
+    start_steps: int = 100
+    start_lr: float = 0.1
+    start_lr_factor: float = 0.6
+    start_lr_patience: int = 10
+    start_t_range: tuple[float, float] = (1.0, 0.0)
+    start_radius_range: float = 0.8
 
     def __init__(self, **settings: Any) -> None:
         defaults = {f.name: f.default for f in fields(self)}
@@ -77,19 +99,19 @@ class SolverConfig:
 
     @classmethod
     def preset(cls, name: str, **overrides) -> SolverConfig:
-        """Named settings: "default" (the paper's) or "fast", then overrides; all of them count as chosen.
+        """Named settings (``PRESETS``), then overrides; all of them count as chosen.
 
-        "fast" keeps the paper's exploration grid and its 10 adjust steps (5 lost a pose on the render
-        oracle), probes with 4 noises instead of 16, keeps 3 candidates, and refines 100 steps per view
-        instead of 600 (where oracle accuracy and median error stop improving): ``bench/README.md``.
+        "default": the paper's. "fast": the paper's grid probed with 2 noises, the best 4 candidates adjusted,
+        3 kept, 50 refinement steps per view, the runner-up polished only when it probes close
+        (``bench/README.md``, the frontier).
+        "ifusion": iFusion's pose search (chinhsuanwu/ifusion, ``optimize_pose_loop``, ``config/main.yaml``):
+        4 starts at azimuth 0, 90, 180, -90 deg, 100 Adam steps each at lr 0.1 with plateau decay (factor
+        0.6, patience 10), both directions per step, the timestep annealed from 1000 to 0; each view against
+        the anchor ("naive"; ``variant="tr"`` with ``refine_steps_per_view`` adds triangular refinement).
         """
-        presets = {
-            "default": {},
-            "fast": dict(probe_batch=4, keep_top=3, refine_steps_per_view=100, runner_up_steps=30),
-        }
-        if name not in presets:
-            raise ValueError(f"unknown solver preset {name!r}; choose one of {sorted(presets)}")
-        config = cls(**{**presets[name], **overrides})
+        if name not in PRESETS:
+            raise ValueError(f"unknown solver preset {name!r}; choose one of {sorted(PRESETS)}")
+        config = cls(**{**PRESETS[name], **overrides})
         config.validate()
         return config
 
@@ -111,17 +133,32 @@ class SolverConfig:
 
         need(self.variant in VARIANTS, "variant", f"one of {VARIANTS}")
         need(self.known_polar in KNOWN_POLAR_MODES, "known_polar", f"one of {KNOWN_POLAR_MODES}")
+        need(self.search in SEARCHES, "search", f"one of {SEARCHES}")
         for name in ("azimuth_candidates", "probe_batch", "keep_top", "average_last", "max_batch",
-                     "grad_batch"):
+                     "grad_batch", "start_steps"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 1, name, "an integer >= 1")
-        for name in ("adjust_steps", "refine_steps_per_view", "runner_up_steps", "seed"):
+        for name in ("adjust_steps", "refine_steps_per_view", "runner_up_steps", "seed", "refine_stop_steps",
+                     "start_lr_patience"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 0, name, "an integer >= 0")
-        for name in ("adjust_lr", "refine_lr", "ambiguity_deg", "ambiguity_margin"):
+        for name in ("adjust_lr", "refine_lr", "ambiguity_deg", "ambiguity_margin", "start_lr",
+                     "start_radius_range"):
             value = getattr(self, name)
             need(isinstance(value, (int, float)) and math.isfinite(value) and value > 0, name, "a finite number > 0")
+        need(isinstance(self.refine_stop_deg, (int, float)) and 0.0 <= self.refine_stop_deg < math.inf,
+             "refine_stop_deg", "a finite number >= 0")
+        need(0.0 < self.start_lr_factor < 1.0, "start_lr_factor", "in (0, 1)")
+        need(self.adjust_top is None or (isinstance(self.adjust_top, int) and self.adjust_top >= 1), "adjust_top",
+             "None (the better half) or an integer >= 1")
+        gate = self.runner_up_gate
+        need(gate is None or (isinstance(gate, (int, float)) and gate >= 0), "runner_up_gate",
+             "None (always polish) or a number >= 0")
         need(0.0 <= self.probe_t < 1.0, "probe_t", "in [0, 1)")
         low, high = self.refine_t_range
         need(0.0 <= low <= high < 1.0, "refine_t_range", "(low, high) with 0 <= low <= high < 1")
+        first, last = self.start_t_range
+        need(0.0 <= first <= 1.0 and 0.0 <= last <= 1.0, "start_t_range", "(first, last) fractions in [0, 1]")
+        need(len(self.start_azimuths_deg) > 0 and all(math.isfinite(a) for a in self.start_azimuths_deg),
+             "start_azimuths_deg", "a non-empty tuple of finite angles")
         if self.polar_candidates_deg is not None:
             need(len(self.polar_candidates_deg) > 0
                  and all(math.isfinite(a) and -180.0 <= a <= 180.0 for a in self.polar_candidates_deg),
@@ -147,3 +184,12 @@ class SolverConfig:
     def as_dict(self) -> dict:
         """Plain dict of every field (for logs and result files)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+# Named settings of ``SolverConfig.preset``; the evidence for each is in ``bench/README.md``.
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "fast": dict(probe_batch=2, adjust_top=4, keep_top=3, refine_steps_per_view=50, runner_up_steps=20,
+                 runner_up_gate=0.3),
+    "ifusion": dict(search="starts", variant="naive", probe_batch=4, refine_steps_per_view=0, runner_up_steps=0),
+}

@@ -141,16 +141,18 @@ class SolverContext:
             errors = self._errors(sample_ref, sample_tgt, sample_pose, t, noise)
         return errors.view(count, 2, batch).mean(dim=2).sum(dim=1).float().cpu()
 
-    def gradient_step(self, ref: torch.Tensor, tgt: torch.Tensor, poses: torch.Tensor) -> torch.Tensor:
+    def gradient_step(self, ref: torch.Tensor, tgt: torch.Tensor, poses: torch.Tensor,
+                      t: torch.Tensor | None = None, noise: torch.Tensor | None = None) -> torch.Tensor:
         """Errors (K,) of one gradient step, back-propagated into the leaves ``poses`` (K, 3) comes from.
 
-        Fresh noise, t uniform in ``refine_t_range``. Forward and backward run per ``grad_batch``
-        chunk and the gradients accumulate (the loss is a sum), so only one chunk's activations are
-        alive at a time. Returns the errors detached.
+        Fresh noise and t uniform in ``refine_t_range`` unless given (``t`` (K,) training steps, ``noise``
+        (K, C, h, w)). Forward and backward run per ``grad_batch`` chunk and the gradients accumulate (the
+        loss is a sum), so only one chunk's activations are alive at a time. Returns the errors detached.
         """
-        low, high = self.refine_t
-        t = torch.randint(low, high + 1, (len(ref),), generator=self.generator)
-        noise = self.draw_noise(len(ref))
+        if t is None:
+            low, high = self.refine_t
+            t = torch.randint(low, high + 1, (len(ref),), generator=self.generator)
+        noise = self.draw_noise(len(ref)) if noise is None else noise
         size = self.config.grad_batch
         parts = []
         for start in range(0, len(ref), size):

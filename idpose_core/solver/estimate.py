@@ -17,6 +17,7 @@ from idpose_core.solver.refinement import refine
 from idpose_core.solver.result import SolverResult
 from idpose_core.solver.scoring import score
 from idpose_core.solver.selection import select
+from idpose_core.solver.starts import search_starts
 from idpose_core.spherical import wrap_azimuth
 
 PIXEL_TOLERANCE = 1e-3
@@ -99,7 +100,8 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
             seconds[stage] = time.perf_counter() - start
             return out
 
-        candidates = timed("exploration", lambda: explore(context, len(images)))
+        search = explore if config.search == "grid" else search_starts
+        candidates = timed("exploration", lambda: search(context, len(images)))
         start = timed("selection", lambda: select(context, candidates))
         poses = timed("refinement", lambda: refine(context, start, config.variant, config.refine_steps_per_view))
         poses[:, 1] = wrap_azimuth(poses[:, 1])

@@ -1,4 +1,4 @@
-"""Exploration: probe a grid of pose candidates per (anchor, view) pair, adjust the better half, keep the best."""
+"""Exploration: probe a grid of pose candidates per (anchor, view) pair, adjust the better ones, keep the best."""
 from __future__ import annotations
 
 import math
@@ -63,7 +63,9 @@ def explore(ctx: SolverContext, view_count: int) -> list[ViewCandidates]:
     config = ctx.config
     grids = [candidate_grid(config, float(polar)) for polar in ctx.known_polar[:view_count - 1]]
     sizes = [len(grid) for grid in grids]
-    halves = [max(size // 2, 1) if config.adjust_steps > 0 else 0 for size in sizes]
+    adjusted_count = (lambda size: min(config.adjust_top, size)) if config.adjust_top else (
+        lambda size: max(size // 2, 1))
+    halves = [adjusted_count(size) if config.adjust_steps > 0 else 0 for size in sizes]
     probe = 2 * config.probe_batch
     ctx.begin_stage("exploration", sum(size * probe + half * (config.adjust_steps + probe)
                                        for size, half in zip(sizes, halves)))

@@ -32,6 +32,18 @@ def mean_pose(iterates: torch.Tensor) -> torch.Tensor:
     return torch.stack([mean[0], circular_mean(iterates[:, 1]), mean[2]])
 
 
+def pose_distance(first: torch.Tensor, second: torch.Tensor) -> torch.Tensor:
+    """Largest of |d polar| and circular |d azimuth| between poses (..., 3), radians."""
+    polar = (first[..., 0] - second[..., 0]).abs()
+    azimuth = torch.remainder(first[..., 1] - second[..., 1], 2.0 * math.pi)
+    return torch.maximum(polar, torch.minimum(azimuth, 2.0 * math.pi - azimuth))
+
+
+def settled(history: list[list[torch.Tensor]], steps: int, bound: float) -> bool:
+    """Whether every view has moved at most ``bound`` radians (``pose_distance``) over its last ``steps`` iterates."""
+    return all(len(h) > steps and float(pose_distance(h[-1], h[-1 - steps])) <= bound for h in history)
+
+
 def refine(ctx: SolverContext, start: torch.Tensor, variant: str, steps_per_view: int,
            stage: str = "refinement") -> torch.Tensor:
     """Refined poses (N-1, 3) from start poses (N-1, 3), anchor to views 1..N-1.
@@ -40,7 +52,9 @@ def refine(ctx: SolverContext, start: torch.Tensor, variant: str, steps_per_view
     (i, j) = schedule[s mod len]: i = 0 updates p_j with ``l(p_j; x0, xj)``; j = 0 updates p_i with
     ``l(p'_i; xi, x0)``; otherwise a seeded coin holds one of p_i, p_j fixed and the other is updated
     with ``l(p'_i + p_j; xi, xj)``. Each step: one sample, fresh noise and t, one SGD step at
-    ``refine_lr``. A view's answer is the mean of its last ``average_last`` iterates.
+    ``refine_lr``. A view's answer is the mean of its last ``average_last`` iterates. With
+    ``refine_stop_steps`` k > 0, it stops once no view moved more than ``refine_stop_deg`` over its last k
+    iterates.
     """
     config = ctx.config
     count = len(start) + 1
@@ -69,5 +83,8 @@ def refine(ctx: SolverContext, start: torch.Tensor, variant: str, steps_per_view
         ctx.hold_known_polar(poses, torch.arange(1, count))
         optimiser.step()
         history[updated - 1].append(poses[updated - 1].detach().cpu().clone())
+        if config.refine_stop_steps and settled(history, config.refine_stop_steps,
+                                                math.radians(config.refine_stop_deg)):
+            break
     return torch.stack([mean_pose(torch.stack(h[-config.average_last:])) if h else start[k].cpu()
                         for k, h in enumerate(history)])

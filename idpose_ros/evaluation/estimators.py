@@ -6,6 +6,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -49,7 +50,7 @@ class EstimatorOptions:
         """The node's parameter values that shape an estimate: the solver's (the preset, the variant and
         the overrides) and ``image_size``; both modes run on exactly these. ValueError names a bad one."""
         config = SolverConfig.preset(self.preset)
-        values = {name: getattr(config, name) for name in SOLVER_PARAMETERS}
+        values = {"preset": self.preset, **{name: getattr(config, name) for name in SOLVER_PARAMETERS}}
         if self.variant is not None:
             values["variant"] = self.variant
         for item in self.solver_params:
@@ -73,8 +74,9 @@ class OfflineEstimator:
     """Runs the node's pipeline in this process on the same parameters the node would get."""
 
     def __init__(self, predictor: NoisePredictor, values: dict[str, Any], model: dict[str, Any] | None = None,
-                 preset: str = "default"):
-        self.predictor, self.values = predictor, values
+                 preset: str = "default", solver_overrides: dict[str, Any] | None = None):
+        """``solver_overrides``: ``SolverConfig`` settings beyond the node's parameters (benchmarks' schedules)."""
+        self.predictor, self.values, self.solver_overrides = predictor, values, solver_overrides or {}
         self.description = {"mode": "offline", "model": model or {"predictor": type(predictor).__name__},
                             "solver_preset": preset}
 
@@ -82,6 +84,8 @@ class OfflineEstimator:
                  progress: Progress | None = None) -> ViewSetEstimate:
         settings = pipeline_settings({**self.values, "anchor_polar_deg": anchor_polar_deg,
                                       "object_distance": object_distance})
+        if self.solver_overrides:
+            settings = dataclasses.replace(settings, solver=settings.solver.updated(**self.solver_overrides))
         start = time.perf_counter()
         result = estimate_view_poses(self.predictor, views, settings, progress=progress)
         solved = result.solver_result

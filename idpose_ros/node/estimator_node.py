@@ -499,7 +499,7 @@ class EstimatorNode(LifecycleNode):
             config = SolverConfig.preset(goal.preset)
         except ValueError as exc:
             raise EstimateRefused(EstimatePoses.Result.INVALID_GOAL, f"preset: {exc}") from exc
-        return {**values, **{name: getattr(config, name) for name in SOLVER_PARAMETERS}}
+        return {**values, "preset": goal.preset, **{name: getattr(config, name) for name in SOLVER_PARAMETERS}}
 
     # ----- estimation ----------------------------------------------------------------------------------------------
     def _buffered_views(self) -> list[View]:

@@ -17,6 +17,7 @@ from rclpy.parameter import Parameter
 from idpose_core.gravity import IMU_WINDOW_S, rotation_from_extrinsic
 from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, MODEL_IMAGE_SIZE, PipelineSettings
 from idpose_core.solver import SolverConfig
+from idpose_core.solver.config import PRESETS
 from idpose_core.stamps import INPUT_TOLERANCE_S
 from idpose_ros.node.input_sync import GRAVITY_MODES
 
@@ -100,6 +101,10 @@ class NodeSettings:
     record_max_bytes: int = field(default=2_000_000_000, metadata=_spec(
         "size at which the recording rotates to a new file (which starts with the buffered views)",
         bounds=(1_000_000, 2**40), read_only=True))
+    preset: str = field(default="", metadata=_spec(
+        "named solver settings: setting it sets the solver parameters below to the preset's values and takes the "
+        "solver's other settings from it (ifusion: iFusion's pose search); empty = the solver parameters as set",
+        choices=("", *PRESETS)))
 
 
 SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
@@ -174,11 +179,14 @@ def solver_config(values: dict[str, Any]) -> SolverConfig:
     """The SolverConfig these parameter values describe.
 
     Every exposed setting counts as chosen (a ROS parameter always has a value), so a model's
-    recommendations fill only the settings the node does not expose. The anchor's known polar angle
-    also narrows the solver's relative polar candidates.
+    recommendations fill only the settings the node does not expose and the ``preset`` does not give
+    (the preset gives those it names). The anchor's known polar angle also narrows the solver's relative
+    polar candidates.
     """
-    return SolverConfig(anchor_polar_deg=values["anchor_polar_deg"],
-                        **{name: values[name] for name in SOLVER_PARAMETERS})
+    exposed = {name: values[name] for name in SOLVER_PARAMETERS}
+    if values.get("preset"):
+        return SolverConfig(**{**PRESETS[values["preset"]], **exposed, "anchor_polar_deg": values["anchor_polar_deg"]})
+    return SolverConfig(anchor_polar_deg=values["anchor_polar_deg"], **exposed)
 
 
 def pipeline_settings(values: dict[str, Any]) -> PipelineSettings:
@@ -202,7 +210,9 @@ def current_values(node: Node) -> dict[str, Any]:
 
 
 def declare_parameters(node: Node) -> None:
-    """Declare every parameter with its descriptor; every later change goes through ``problem``.
+    """Declare every parameter with its descriptor; every later change goes through ``problem``. Setting
+    ``preset`` to a name (at start-up too) sets the exposed solver parameters to its values, except those
+    set in the same call.
 
     Raises rclpy's InvalidParameterValueException naming the problem when an override is invalid.
     """
@@ -213,3 +223,18 @@ def declare_parameters(node: Node) -> None:
     node.add_on_set_parameters_callback(check)
     for name, default, spec in parameter_table():
         node.declare_parameter(name, default, descriptor(name, default, spec))
+
+    def apply_preset(changes: list[Parameter]) -> None:
+        named = {change.name for change in changes}
+        for change in changes:
+            if change.name == "preset" and change.value:
+                node.set_parameters([p for p in preset_parameters(change.value) if p.name not in named])
+
+    node.add_post_set_parameters_callback(apply_preset)
+    apply_preset([node.get_parameter("preset")])
+
+
+def preset_parameters(name: str) -> list[Parameter]:
+    """The exposed solver parameters at preset ``name``'s values (so ``ros2 param get`` shows what runs)."""
+    config = SolverConfig.preset(name)
+    return [Parameter(field, value=getattr(config, field)) for field in SOLVER_PARAMETERS]

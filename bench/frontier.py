@@ -1,0 +1,188 @@
+#!/usr/bin/env python3
+"""The accuracy-cost frontier of the solver's schedules: one table, one row per schedule.
+
+Per row: predictor samples per estimate (the solver's counters on one render-oracle scene, no anchor
+polar angle known, so 5 polar candidates), seconds per estimate with the embedded demo model (on the
+demo bags), the projected full-size seconds (``bench/unit_costs.py``, float32 and bfloat16), and
+RotAcc@15/30 and the median rotation error on three sets: fresh demo-object bags (camera seed
+``--seed``), the render oracle (``bench/solver_oracle.py``'s scenes, its learning rates) and rolled
+bags (up to 45 deg) estimated with their Imu gravity; the bags are evaluated with ``evaluate_bag``.
+``--rows`` picks rows (``ROWS`` and the cost levers ``LEVERS``), ``--bag-rows`` those also run on the
+bags; prints the table, writes bench/results/frontier.json (or ``--out``).
+
+    python bench/frontier.py [--pairs 1] [--objects 6] [--oracle-objects 12] [--rows default fast ifusion]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script from a checkout
+
+import numpy as np  # noqa: E402 (after the path setup)
+import torch  # noqa: E402
+
+from bench.solver_oracle import RENDER_SIZE, oracle_records, scene_cameras  # noqa: E402
+from bench.unit_costs import UnitCosts  # noqa: E402
+from idpose_core.evaluation.protocol import EvaluationProtocol  # noqa: E402
+from idpose_core.metrics import aggregate  # noqa: E402
+from idpose_core.model_loading import load_predictor  # noqa: E402
+from idpose_core.solver import SolverConfig, estimate_poses  # noqa: E402
+from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOracle  # noqa: E402
+from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, oracle_objects  # noqa: E402
+from idpose_ros.dataset.synthetic_bag import IMU_TOPIC, SyntheticBagOptions, make_bag  # noqa: E402
+from idpose_ros.evaluation.bag_evaluation import evaluate_bag  # noqa: E402
+from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
+from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator  # noqa: E402
+from idpose_ros.evaluation.ground_truth import GroundTruthOptions  # noqa: E402
+
+OUT = ROOT / "bench" / "results" / "frontier.json"
+# The fast preset before the frontier (kept to show what the leaner one saves).
+OLD_FAST = dict(probe_batch=4, keep_top=3, refine_steps_per_view=100, runner_up_steps=30)
+# row -> (view count, preset, SolverConfig overrides)
+ROWS: dict[str, tuple[int, str, dict[str, Any]]] = {
+    "default": (2, "default", {}),
+    "fast (old)": (2, "default", OLD_FAST),
+    "fast": (2, "fast", {}),
+    "ifusion": (2, "ifusion", {}),
+    "ifusion n=4": (4, "ifusion", {}),
+}
+# One lever at a time from the old fast schedule (n = 2), for choosing the new one.
+LEVERS: dict[str, tuple[int, str, dict[str, Any]]] = {
+    "old fast, probe 2": (2, "default", {**OLD_FAST, "probe_batch": 2}),
+    "old fast, adjust 4": (2, "default", {**OLD_FAST, "adjust_top": 4}),
+    "old fast, adjust 2": (2, "default", {**OLD_FAST, "adjust_top": 2}),
+    "old fast, refine 50": (2, "default", {**OLD_FAST, "refine_steps_per_view": 50}),
+    "old fast, stop 0.5 deg / 10": (2, "default", {**OLD_FAST, "refine_stop_deg": 0.5, "refine_stop_steps": 10}),
+    "old fast, gate 0.3": (2, "default", {**OLD_FAST, "runner_up_gate": 0.3}),
+    "old fast, 6 azimuths": (2, "default", {**OLD_FAST, "azimuth_candidates": 6}),
+    "ifusion, 50 steps": (2, "ifusion", {"start_steps": 50}),
+}
+ORACLE_RATES = {name: ORACLE_SOLVER_SETTINGS[name] for name in ("adjust_lr", "refine_lr")}
+WITH_GRAVITY = GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
+ROLL_DEG = 45.0
+
+
+def accuracy(records: list[dict]) -> dict[str, float]:
+    """RotAcc@15/30 and median rotation error of pair records, with the pair count."""
+    summary = aggregate(records)["all"]
+    return {key: summary[key] for key in ("pairs", "rot_acc_15", "rot_acc_30", "median_rot_err_deg")}
+
+
+def bag_sets(rows: dict, args: argparse.Namespace, work: Path) -> dict[str, dict]:
+    """Per row: its records on the demo bags and the rolled bags with gravity, the cost of its demo-bag estimates."""
+    predictor = load_predictor("", "cpu", "float32")
+    out = {}
+    bags = {}
+    for spec in demo_objects()[: args.objects]:
+        bags[("demo", spec.name)] = make_bag(work / f"demo_{spec.name}", SyntheticBagOptions(
+            object_name=spec.name, views=args.views, seed=args.seed))
+        bags[("rolled", spec.name)] = make_bag(work / f"rolled_{spec.name}", SyntheticBagOptions(
+            object_name=spec.name, views=args.views, seed=args.seed + 1, roll_deg=ROLL_DEG))
+    for row, (count, preset, overrides) in rows.items():
+        estimator = OfflineEstimator(predictor, EstimatorOptions(preset=preset).node_values(),
+                                     preset=preset, solver_overrides=overrides)
+        protocol = EvaluationProtocol(args.pairs, args.seed, (count,))
+        records: dict[str, list] = {"demo": [], "rolled": []}
+        estimates = []
+        started = time.monotonic()
+        for (kind, _), bag in bags.items():
+            evaluation = evaluate_bag(bag, estimator, WITH_GRAVITY if kind == "rolled" else None, protocol,
+                                      show_progress=False)
+            records[kind].extend(evaluation.records)
+            if kind == "demo":
+                estimates.extend(evaluation.estimates)
+        details = [estimate["details"] for estimate in estimates]
+        out[row] = {"demo": accuracy(records["demo"]), "rolled": accuracy(records["rolled"]),
+                    "bag_forward_samples": float(np.mean([d["forward_samples"] for d in details])),
+                    "bag_backward_samples": float(np.mean([d["backward_samples"] for d in details])),
+                    "seconds": float(np.mean([estimate["seconds"] for estimate in estimates]))}
+        print(f"{row}: bags done in {time.monotonic() - started:.0f} s: {json.dumps(out[row])}", flush=True)
+    return out
+
+
+def oracle_set(rows: dict, args: argparse.Namespace) -> dict[str, dict]:
+    """Per row: accuracy on the render oracle's scenes (its learning rates, the row's other settings) and the
+    predictor samples of one of its estimates (the first scene; no anchor polar angle: 5 polar candidates)."""
+    out = {}
+    for row, (count, preset, overrides) in rows.items():
+        config = SolverConfig.preset(preset, **{**overrides, **ORACLE_RATES})
+        specs = oracle_objects()[: args.oracle_objects]
+        records = oracle_records(specs, count, {row: config})[row]["records"]
+        views = scene_cameras(0, 0, count)
+        with SceneRenderer(specs[0], image_size=RENDER_SIZE) as renderer:
+            renders = np.stack([renderer.render(*view)[0] for view in views])
+        images = torch.from_numpy(renders).permute(0, 3, 1, 2).float() / 127.5 - 1.0
+        result = estimate_poses(RenderOracle(specs[0], views), images, config)
+        out[row] = {"accuracy": accuracy(records), "forward_samples": result.forward_samples,
+                    "backward_samples": result.backward_samples,
+                    "batched_samples": result.stage_samples["exploration"][1]}
+        print(f"{row}: oracle {json.dumps(out[row])}", flush=True)
+    return out
+
+
+def projected(row: dict, views: int) -> dict[str, float]:
+    """Full-size seconds per estimate from the row's counters, float32 and bfloat16 (wall seconds of item 1)."""
+    return {precision: UnitCosts.load(precision=precision).ours_seconds(
+        views, row["forward_samples"], row["backward_samples"], row["batched_samples"])
+        for precision in ("float32", "bfloat16")}
+
+
+def table(result: dict) -> str:
+    """The frontier as one Markdown table."""
+    lines = ["| schedule | n | samples (differentiated) | demo model s | full-size s float32 | full-size s bfloat16 "
+             "| demo bags @15 / @30 / median | oracle @15 / @30 / median | rolled + gravity @15 / @30 / median |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+
+    def cell(acc: dict | None) -> str:
+        if acc is None:
+            return "not run"
+        return (f"{100 * acc['rot_acc_15']:.0f}% / {100 * acc['rot_acc_30']:.0f}% / "
+                f"{acc['median_rot_err_deg']:.2g} deg ({acc['pairs']})")
+    for name, row in result["rows"].items():
+        seconds = f"{row['seconds']:.0f}" if "seconds" in row else "not run"
+        lines.append(f"| {name} | {row['n']} | {row['forward_samples']} ({row['backward_samples']}) | "
+                     f"{seconds} | {row['projected']['float32']:.0f} | {row['projected']['bfloat16']:.0f} | "
+                     f"{cell(row.get('demo'))} | {cell(row['oracle'])} | {cell(row.get('rolled'))} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rows", nargs="+", default=list(ROWS), choices=[*ROWS, *LEVERS])
+    parser.add_argument("--bag-rows", nargs="*", help="rows also run on the bags (default: all of --rows)")
+    parser.add_argument("--pairs", type=int, default=1, help="evaluate_bag picks per bag")
+    parser.add_argument("--objects", type=int, default=6, help="demo objects (one fresh and one rolled bag each)")
+    parser.add_argument("--views", type=int, default=8, help="views per bag")
+    parser.add_argument("--oracle-objects", type=int, default=12, help="render-oracle objects (one scene each)")
+    parser.add_argument("--seed", type=int, default=4242, help="camera and pick seed of the fresh bags")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    rows = {name: {**ROWS, **LEVERS}[name] for name in args.rows}
+    started = time.monotonic()
+    oracle = oracle_set(rows, args)
+    bag_rows = {name: rows[name] for name in (args.rows if args.bag_rows is None else args.bag_rows)}
+    with tempfile.TemporaryDirectory(prefix="idpose_frontier_") as folder:
+        bags = bag_sets(bag_rows, args, Path(folder))
+    result = {"arguments": {k: str(v) for k, v in vars(args).items() if k != "out"}, "rows": {}}
+    for name, (count, preset, overrides) in rows.items():
+        row = {"n": count, "preset": preset, "overrides": overrides, **bags.get(name, {}),
+               **{key: value for key, value in oracle[name].items() if key != "accuracy"},
+               "oracle": oracle[name]["accuracy"]}
+        row["projected"] = projected(row, count)
+        result["rows"][name] = row
+    result["minutes"] = (time.monotonic() - started) / 60
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print("\n" + table(result), flush=True)
+
+
+if __name__ == "__main__":
+    main()
