@@ -39,7 +39,8 @@ PROVIDED_BY = {
     "numpy": "python3-numpy", "cv2": "python3-opencv", "tqdm": "python3-tqdm", "matplotlib": "python3-matplotlib",
     "torch": "python3-torch", "transformers": "python3-transformers-pip", "rosbags": "python3-rosbags-pip",
     "pybullet": "python3-pybullet-pip", "pybullet_data": "python3-pybullet-pip", "diffusers": None,
-    "safetensors": None, "ray": None, "pycolmap": None, "mcap": None, **{name: name for name in [*ROS_PACKAGES, *WORKSPACE_PACKAGES]},
+    "safetensors": None, "ray": None, "pycolmap": None, "mcap": None,
+    **{name: name for name in [*ROS_PACKAGES, *WORKSPACE_PACKAGES]},
 }
 REQUIREMENT_OF = {"diffusers": "diffusers", "safetensors": "safetensors", "ray": "ray", "pycolmap": "pycolmap",
                   "mcap": "mcap"}
