@@ -8,9 +8,10 @@ import torch
 
 from idpose_core.demo_model import DemoPredictor, demo_predictor
 from idpose_core.demo_model.model import WEIGHTS_FILE
+from idpose_core.devices import resolve_device
 from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.zero123 import ModelLoadError, Zero123Predictor
-from idpose_core.zero123.zero123_predictor import resolve_device, resolve_dtype
+from idpose_core.zero123.zero123_predictor import resolve_dtype
 
 PRECISIONS = {"auto": None, "float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth", ".safetensors")
@@ -25,7 +26,8 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
 
     ``precision``: "auto" (float32 on CPU, bfloat16/float16 on CUDA), "float32", "float16",
     "bfloat16" (on CPUs with native bfloat16, e.g. avx512_bf16 or AMX, about twice as fast as float32:
-    ``bench/README.md``). Raises ``ModelLoadError`` naming the path, the problem and what to download.
+    ``bench/README.md``). Raises ``ModelLoadError`` naming the path, the problem and what to download, and
+    ``DeviceUnavailable`` (before anything is read) for a device that does not exist here.
     """
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {sorted(PRECISIONS)}, got {precision!r}")

@@ -6,19 +6,13 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 
+from idpose_core.devices import resolve_device
 from idpose_core.noise_predictor import Views
 from idpose_core.zero123.config import Zero123Config
 from idpose_core.zero123.ldm_checkpoint import load_ldm_checkpoint
 from idpose_core.zero123.loading import load_diffusers_folder, save_diffusers_folder
 from idpose_core.zero123.modules import Zero123Modules, build_modules
 from idpose_core.zero123.sampling import sample_view as ddim_sample_view
-
-
-def resolve_device(device: str | torch.device) -> torch.device:
-    """``"auto"`` -> CUDA when available, else CPU."""
-    if str(device) == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
 
 
 def resolve_dtype(dtype: torch.dtype | None, device: torch.device) -> torch.dtype:

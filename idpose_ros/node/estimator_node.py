@@ -260,7 +260,7 @@ class EstimatorNode(LifecycleNode):
     def _model_unavailable(self, reason: str) -> None:
         """The one error log of a missing/broken model; estimates then refuse with this reason."""
         self.get_logger().error(f"{reason} (the node stays up; estimates are refused until it is restarted with "
-                                "a valid model_path)")
+                                "valid model parameters: model_path, device, precision)")
         self._set_state("failed", reason)
 
     # ----- images ----------------------------------------------------------------------------------------------
