@@ -25,7 +25,7 @@ def report(tmp_path_factory) -> dict:
 def test_step_and_probe_cost_and_memory_per_precision(report):
     assert set(report["precisions"]) == {"bfloat16", "float32"}
     for costs in report["precisions"].values():
-        for kind in ("step", "probe"):
+        for kind in ("step", "step_with_cancel_hooks", "probe"):
             assert costs[kind]["seconds"] > 0 and costs[kind]["peak_gb"] > 0
     for precision, ratio in report["step_ratio_official_over_ours"].items():
         assert ratio == pytest.approx(report["official_step_float32"]["seconds"]
@@ -38,3 +38,11 @@ def test_one_estimate_per_preset_with_its_sample_counts(report):
         assert 0 < row["backward_samples"] < row["forward_samples"] and row["seconds"] > 0
     # the reduced ifusion search: 4 starts x 2 directions x 2 steps differentiated, nothing else
     assert report["estimates"]["ifusion"]["backward_samples"] == 16
+
+
+def test_an_absent_device_is_one_line():
+    if __import__("torch").cuda.is_available():
+        pytest.skip("a CUDA device is visible here")
+    done = subprocess.run([sys.executable, "bench/gpu_check.py", "--reduced", "--device", "cuda"], cwd=ROOT,
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and "device 'cuda' is not available" in done.stderr and "Traceback" not in done.stderr
