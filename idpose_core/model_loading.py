@@ -22,7 +22,9 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
 
     An empty ``model_path`` loads the embedded demo model (``idpose_core/assets/demo_model``) with a
     loud warning: it only knows the demo objects; real objects need Zero-1-to-3. Where the
-    package carries no demo weights, an empty path is a ``ModelLoadError``.
+    package carries no demo weights, an empty path is a ``ModelLoadError``. A folder holding
+    ``model.safetensors`` and ``config.json`` at its top (what ``scripts/train_demo_model.py`` writes) is
+    a demo model too.
 
     ``precision``: "auto" (float32 on CPU, bfloat16/float16 on CUDA), "float32", "float16",
     "bfloat16" (on CPUs with native bfloat16, e.g. avx512_bf16 or AMX, about twice as fast as float32:
@@ -36,6 +38,7 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
         logging.getLogger(__name__).warning(
             "precision float16 on the CPU: PyTorch has no fast float16 CPU kernels, an estimate will be far slower "
             "than in float32; use bfloat16 (CPUs with avx512_bf16 or AMX) or float32")
+    dtype = resolve_dtype(PRECISIONS[precision], device)
     if not str(model_path).strip():
         folder = demo_predictor.EMBEDDED_MODEL_DIR
         if not (folder / WEIGHTS_FILE).is_file():
@@ -45,8 +48,11 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
             "model_path is empty: using the EMBEDDED DEMO MODEL (%s), a small diffusion model trained only on "
             "the synthetic demo objects. It is a demonstration: poses of real objects need Zero-1-to-3 weights "
             "(set model_path).", folder)
-        return DemoPredictor.from_pretrained(folder, device, resolve_dtype(PRECISIONS[precision], device))
+        return DemoPredictor.from_pretrained(folder, device, dtype)
     path = Path(model_path).expanduser()
+    if (path / WEIGHTS_FILE).is_file() and (path / "config.json").is_file():
+        logging.getLogger(__name__).warning("model_path %s is a demo model: it only knows the demo objects", path)
+        return DemoPredictor.from_pretrained(path, device, dtype)
     if path.is_dir():
         return Zero123Predictor.from_pretrained(path, device=device, dtype=PRECISIONS[precision])
     if path.is_file() and path.suffix in CHECKPOINT_SUFFIXES:

@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from idpose_ros.dataset.synthetic_bag import OBJECT_SETS, SCENES, TABLETOP_SIZE, SyntheticBagOptions, make_bag
+from idpose_ros.dataset.synthetic_bag import LIGHTS, OBJECT_SETS, SCENES, TABLETOP_SIZE, SyntheticBagOptions, make_bag
 from idpose_ros.evaluation.bag_io import BagError
 
 
@@ -30,9 +30,11 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, SyntheticBag
                         help="turn each camera about its optical axis by a random angle in [-R, R] degrees")
     parser.add_argument("--depth-format", choices=("16UC1", "32FC1"), default=default.depth_format,
                         help="tabletop depth encoding: 16UC1 millimetres (RealSense) or 32FC1 metres")
+    parser.add_argument("--light", choices=LIGHTS, default=default.light,
+                        help="tabletop: a random lamp with shadows, or the light of the white scenes (training)")
     args = parser.parse_args(argv)
     options = SyntheticBagOptions(args.storage, args.objects, args.object, args.views, args.seed, args.size,
-                                  args.scene, args.roll_deg, args.depth_format)
+                                  args.scene, args.roll_deg, args.depth_format, args.light)
     try:
         options.check()
     except BagError as err:

@@ -7,7 +7,12 @@ shows a progress bar with the loss and the true-vs-wrong-pose loss gap, logs the
 inversion check (RotAcc on held-out views) to ``curve.csv`` and finally writes the EMA weights,
 ``solver_defaults.json`` and ``training.json`` into --out.
 
-    python scripts/train_demo_model.py --minutes 85       # the shipped model: 2 cores, nothing else running
+Two phases in one run: ``--minutes`` on clean renders, then ``--robot-minutes`` on robot crops (the same
+cameras also rendered under random lights with shadows, and each view of a pair augmented by
+``idpose_core.demo_model.robot_crops``), its learning rate warmed up and decayed again. ``--init-from`` a
+model folder skips the clean phase and starts the robot phase from those weights.
+
+    python scripts/train_demo_model.py                    # 85 + 60 minutes: 2 cores, nothing else running
 """
 from __future__ import annotations
 
@@ -39,6 +44,8 @@ from idpose_core.demo_model.training_data import (
     PairBatch,
     PairPool,
     RenderedViews,
+    RobotCrops,
+    cached_lit,
     cached_views,
     make_pairs,
     random_pairs,
@@ -49,6 +56,7 @@ from idpose_core.synthetic.scenes import demo_objects
 GAP_TIMESTEPS = (400, 550, 700, 850)  # inside the default training range
 CHECK_AZIMUTHS = 12
 CHECK_POLARS_DEG = (-45.0, 0.0, 45.0)
+WARM_UP = 0.02  # of a phase's budget
 
 
 def parse_args() -> argparse.Namespace:
@@ -56,7 +64,13 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=EMBEDDED_MODEL_DIR, help="where the final model goes")
     parser.add_argument("--work-dir", type=Path, default=Path.home() / ".cache" / "idpose_demo_model",
                         help="render cache, checkpoint and curve.csv (not in git)")
-    parser.add_argument("--minutes", type=float, default=85.0, help="training wall-time budget")
+    parser.add_argument("--minutes", type=float, default=85.0, help="wall-time budget of the clean phase")
+    parser.add_argument("--robot-minutes", type=float, default=60.0,
+                        help="wall-time budget of the robot-crop phase that follows (0: none)")
+    parser.add_argument("--robot-lr", type=float, default=4e-4, help="peak learning rate of the robot-crop phase")
+    parser.add_argument("--lit-variants", type=int, default=2, help="random-light renders per training camera")
+    parser.add_argument("--init-from", type=Path, default=None,
+                        help="a model folder: skip the clean phase and start the robot phase from its weights")
     parser.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (0: budget only)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
@@ -171,10 +185,17 @@ def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: to
     return denoising + view_weight * (model.view_head_output(embedding) - wanted_view).pow(2).mean(), denoising
 
 
-def learning_rate_factor(step: int, progress: float) -> float:
-    """Linear warm-up over 200 steps, then a cosine decay to a tenth over the wall-time budget."""
+def learning_rate_factor(progress: float) -> float:
+    """Linear warm-up over the first WARM_UP of a phase's wall-time budget, then a cosine decay to a tenth."""
     cosine = 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
-    return min(1.0, (step + 1) / 200) * (0.1 + 0.9 * cosine)
+    return min(1.0, max(progress, 1e-3) / WARM_UP) * (0.1 + 0.9 * cosine)
+
+
+def phase_at(elapsed: float, clean_budget: float, robot_budget: float) -> tuple[str, float, float]:
+    """(phase, seconds into it, its budget) at ``elapsed`` seconds of training."""
+    if elapsed < clean_budget:
+        return "clean", elapsed, clean_budget
+    return "robot", elapsed - clean_budget, robot_budget
 
 
 def main() -> None:
@@ -187,6 +208,9 @@ def main() -> None:
                              token_in_timestep_embedding=args.token_in_timestep,
                              prediction_type=args.prediction_type)
     model = DemoDiffusionModel(config)
+    if args.init_from is not None:
+        model = DemoDiffusionModel.from_pretrained(args.init_from)
+        config = model.config
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     ema = EMAModel(model.parameters(), decay=args.ema_decay)
     checkpoint_path = args.work_dir / "checkpoint.pt"
@@ -217,20 +241,30 @@ def main() -> None:
         writer.writerow(["step", "minutes", "loss"] + [f"gap_t{t}" for t in GAP_TIMESTEPS]
                         + ["check_t", "acc15", "acc30"])
 
-    budget = args.minutes * 60.0
+    clean_budget = 0.0 if args.init_from is not None else args.minutes * 60.0
+    robot_budget = args.robot_minutes * 60.0
+    budget = clean_budget + robot_budget
+    crops = RobotCrops(cached_lit(args.work_dir / f"lit_{args.seed}_{args.lit_variants}.npz", demo_objects(), train,
+                                  args.seed + 2000, args.lit_variants)) if robot_budget > 0 else None
     started = time.monotonic() - elapsed
     last_checkpoint = last_check = time.monotonic()
     gaps: dict[int, float] = {}
     losses: list[float] = []
     jitter = (1.5 - args.window_jitter, 1.5 + args.window_jitter)
-    pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter)
-    pool.fill(np.random.default_rng([args.seed, step, 1]), min(512, args.pool))
+    phase, pool = "", None
     bar = tqdm(total=int(budget), initial=int(elapsed), unit="s", desc="train demo model")
     model.train()
     while True:
         elapsed = time.monotonic() - started
         if elapsed >= budget or (args.max_steps and step >= args.max_steps):
             break
+        now_phase, into, phase_budget = phase_at(elapsed, clean_budget, robot_budget)
+        if now_phase != phase:
+            phase = now_phase
+            pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter,
+                            crops if phase == "robot" else None)
+            pool.fill(np.random.default_rng([args.seed, step, 1]), min(512, args.pool))
+            bar.set_description(f"train demo model ({phase} phase)")
         rng = np.random.default_rng([args.seed, step])
         reference, target, pose, reference_view = pool.draw(rng, args.batch)
         t = torch.as_tensor(rng.integers(args.t_min, args.t_max + 1, size=args.batch))
@@ -238,8 +272,9 @@ def main() -> None:
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        peak = args.lr if phase == "clean" else args.robot_lr
         for group in optimizer.param_groups:
-            group["lr"] = args.lr * learning_rate_factor(step, elapsed / budget)
+            group["lr"] = peak * learning_rate_factor(into / phase_budget)
         optimizer.step()
         ema.step(model.parameters())
         step += 1
@@ -286,6 +321,11 @@ def main() -> None:
         "seed": args.seed,
         "phases": history,
         "config": asdict(config),
+        "initial_weights": None if args.init_from is None else {
+            "folder": str(args.init_from), "training": json.loads((args.init_from / "training.json").read_text())
+            if (args.init_from / "training.json").is_file() else None},
+        "robot_crops": None if crops is None else {"lit_variants": args.lit_variants,
+                                                   "augmentation": asdict(crops.augmentation)},
         "data": {"objects": list(train.names), "train_views_per_object": train.views_per_object,
                  "heldout_views_per_object": heldout.views_per_object, "image_size": args.image_size,
                  "polar_deg": [30, 150], "fov_deg": 60},

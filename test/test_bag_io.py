@@ -22,6 +22,7 @@ from idpose_ros.dataset.synthetic_bag import (
     PERIOD_NS,
     POSE_TOPIC,
     START_NS,
+    TRUE_MASK_TOPIC,
     SyntheticBagOptions,
     make_bag,
     write_pose,
@@ -29,7 +30,7 @@ from idpose_ros.dataset.synthetic_bag import (
     write_tf,
 )
 from idpose_ros.evaluation.bag_io import BagError, BagWriter
-from idpose_ros.evaluation.bag_views import load_views, read_bag_views
+from idpose_ros.evaluation.bag_views import ExtraTopics, load_views, read_bag_views
 
 SECOND = 1_000_000_000
 
@@ -83,6 +84,18 @@ def test_images_decode_with_the_mask_in_alpha(tiny_bag):
     assert set(np.unique(alpha)) == {0, 255}
     assert np.all(rgb[alpha == 0] == 255)  # white background
     assert np.any(rgb[alpha == 255] < 200)  # a coloured object
+
+
+def test_a_tabletop_bag_under_the_training_light_is_the_same_scene_lit_otherwise(tmp_path):
+    bags = {light: make_bag(tmp_path / light, SyntheticBagOptions(views=2, seed=3, size=64, scene="tabletop",
+                                                                 light=light)) for light in ("random", "training")}
+    extras = ExtraTopics(mask_topic=TRUE_MASK_TOPIC)
+    views = {light: load_views(bag, IMAGE_TOPIC, {1}, read_bag_views(bag, IMAGE_TOPIC, extras=extras), extras)[0][1]
+             for light, bag in bags.items()}
+    assert np.array_equal(views["random"].mask, views["training"].mask)  # same layout and camera
+    assert np.abs(views["random"].rgb.astype(float) - views["training"].rgb).mean() > 3.0
+    with pytest.raises(BagError, match="light must be one of random, training"):
+        SyntheticBagOptions(light="sun").check()
 
 
 def test_a_bare_storage_file_is_a_bag(tiny_bag):

@@ -28,6 +28,18 @@ def test_empty_model_path_loads_the_embedded_model_with_a_warning(tmp_path, monk
     assert "EMBEDDED DEMO MODEL" in caplog.text and "Zero-1-to-3" in caplog.text
 
 
+def test_a_demo_model_folder_as_model_path_loads_that_model(tmp_path, caplog):
+    torch.manual_seed(1)
+    DemoDiffusionModel(TINY).save_pretrained(tmp_path / "trained")
+    with caplog.at_level(logging.WARNING):
+        predictor = load_predictor(str(tmp_path / "trained"), device="cpu")
+    assert isinstance(predictor, DemoPredictor) and predictor.model.config == TINY
+    assert "demo model" in caplog.text
+    (tmp_path / "trained" / "config.json").unlink()  # no longer a demo model folder: read as Zero-1-to-3's
+    with pytest.raises(ModelLoadError, match="not a Zero-1-to-3 diffusers folder"):
+        load_predictor(str(tmp_path / "trained"), device="cpu")
+
+
 def test_empty_model_path_without_an_embedded_model_is_a_load_error(tmp_path, monkeypatch):
     monkeypatch.setattr(demo_predictor, "EMBEDDED_MODEL_DIR", tmp_path)
     with pytest.raises(ModelLoadError, match="no embedded demo model is installed"):

@@ -6,12 +6,14 @@ import pytest
 
 from idpose_core.synthetic.scenes import (
     CAMERA_RADIUS,
+    TRAINING_LIGHT,
     ObjectSpec,
     SceneRenderer,
     camera_up,
     demo_objects,
     oracle_objects,
     random_camera_spheres,
+    random_light,
     symmetric_objects,
     unseen_objects,
 )
@@ -70,6 +72,24 @@ def test_renders_are_deterministic_and_depend_on_the_pose():
         c, _ = first.render(1.0, 2.5)
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
+
+
+def test_a_light_changes_the_shading_not_the_mask():
+    spec = demo_objects()[0]
+    with SceneRenderer(spec, image_size=SIZE) as renderer:
+        clean, clean_mask = renderer.render(1.0, 2.0)
+        assert np.array_equal(renderer.render(1.0, 2.0, light=TRAINING_LIGHT)[0], clean)  # the default
+        lit, lit_mask = renderer.render(1.0, 2.0, light=random_light(np.random.default_rng(3)))
+    assert np.array_equal(lit_mask, clean_mask)
+    assert np.abs(lit[clean_mask].astype(float) - clean[clean_mask]).mean() > 5.0
+
+
+def test_random_lights_shine_from_above_with_shadows_and_are_seeded():
+    lights = [random_light(np.random.default_rng(seed), elevation_deg=(20.0, 60.0)) for seed in range(20)]
+    elevations = [math.degrees(math.asin(light.direction[2] / np.linalg.norm(light.direction))) for light in lights]
+    assert all(20.0 <= e <= 60.0 for e in elevations) and all(light.shadow for light in lights)
+    assert len({light.direction for light in lights}) == 20
+    assert random_light(np.random.default_rng(5)) == random_light(np.random.default_rng(5))
 
 
 def test_half_turn_symmetric_objects_have_half_turn_symmetric_silhouettes():

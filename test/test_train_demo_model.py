@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from idpose_core.demo_model import DemoPredictor
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "train_demo_model.py"
@@ -14,9 +16,9 @@ TOY = ["--threads", "1", "--train-views", "3", "--heldout-views", "3", "--image-
        "--check-pairs", "2", "--gap-every", "2", "--minutes", "30"]
 
 
-def train(work: Path, out: Path, steps: int) -> subprocess.CompletedProcess:
+def train(work: Path, out: Path, steps: int, *extra: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, str(SCRIPT), "--work-dir", str(work), "--out", str(out),
-                           "--max-steps", str(steps), *TOY], capture_output=True, text=True, timeout=600)
+                           "--max-steps", str(steps), *TOY, *extra], capture_output=True, text=True, timeout=600)
 
 
 def test_training_resumes_and_writes_a_loadable_model_with_its_records(tmp_path):
@@ -36,3 +38,20 @@ def test_training_resumes_and_writes_a_loadable_model_with_its_records(tmp_path)
     predictor = DemoPredictor.from_pretrained(out)
     assert predictor.model.config.block_out_channels == (8, 16)
     assert 0.0 < predictor.solver_defaults["probe_t"] < 1.0
+
+
+def test_the_robot_phase_starts_from_given_weights_on_lit_augmented_crops(tmp_path):
+    clean = tmp_path / "clean"
+    assert train(tmp_path / "work_clean", clean, 2).returncode == 0
+    out = tmp_path / "robot"
+    robot = train(tmp_path / "work_robot", out, 3, "--init-from", str(clean), "--lit-variants", "1")
+    assert robot.returncode == 0, robot.stderr[-2000:]
+    assert "robot phase" in robot.stderr
+    lit = np.load(tmp_path / "work_robot" / "lit_0_1.npz")["rgb"]
+    plain = np.load(tmp_path / "work_robot" / "train_0.npz")["rgb"]
+    assert lit.shape == (6, 3, 1, 32, 32, 3) and not np.array_equal(lit[:, :, 0], plain)  # other lights
+    training = json.loads((out / "training.json").read_text())
+    assert training["initial_weights"]["training"]["steps"] == 2
+    assert training["robot_crops"]["lit_variants"] == 1 and training["robot_crops"]["augmentation"]["clean"] > 0
+    assert training["steps"] == 3
+    assert DemoPredictor.from_pretrained(out).model.config.block_out_channels == (8, 16)

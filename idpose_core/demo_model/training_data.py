@@ -3,7 +3,9 @@
 Views are rendered once per object from random cameras (``random_camera_spheres``, fixed radius,
 60 deg FOV) and cached as ``.npz``. A pair (reference, target) of the same object goes through the
 pipeline's own ``preprocess_views`` (one window for the pair, white background, 256 px) and the
-model's ``downsample``, exactly what the model sees at inference, with the window scale jittered.
+model's ``downsample``, exactly what the model sees at inference, with the window scale jittered. For robot
+scenes (``RobotCrops``) each view of a pair is drawn from renders of its camera under random lights and goes
+through ``robot_crop``'s augmentation first.
 """
 from __future__ import annotations
 
@@ -15,9 +17,10 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from idpose_core.preprocessing import preprocess_views
+from idpose_core.demo_model.robot_crops import CropAugmentation, robot_crop
+from idpose_core.preprocessing import PreprocessingError, check_object_mask, preprocess_views
 from idpose_core.spherical import relative
-from idpose_core.synthetic.scenes import ObjectSpec, SceneRenderer, random_camera_spheres
+from idpose_core.synthetic.scenes import ObjectSpec, SceneRenderer, random_camera_spheres, random_light
 from idpose_core.view_input import ViewInput
 
 
@@ -70,6 +73,62 @@ def cached_views(cache: Path, specs: Sequence[ObjectSpec], views_per_object: int
     return views
 
 
+LIT_ELEVATION_DEG = (10.0, 85.0)  # lamps from near the horizon to overhead
+LIT_AMBIENT = (0.3, 0.7)
+LIT_DIFFUSE = (0.3, 0.7)
+
+
+def render_lit(specs: Sequence[ObjectSpec], cameras: np.ndarray, image_size: int, seed: int, variants: int
+               ) -> np.ndarray:
+    """Each object's cameras (O, V, 3) rendered again under ``variants`` random lights with shadows each, one
+    light drawn per render: (O, V, variants, S, S, 3) uint8 (the masks are the clean renders')."""
+    rng = np.random.default_rng(seed)
+    out = np.empty((*cameras.shape[:2], variants, image_size, image_size, 3), np.uint8)
+    for o, spec in enumerate(tqdm(specs, desc=f"render {variants} lit variants/view", unit="object")):
+        with SceneRenderer(spec, image_size) as renderer:
+            for v, camera in enumerate(cameras[o]):
+                for k in range(variants):
+                    light = random_light(rng, LIT_ELEVATION_DEG, LIT_AMBIENT, LIT_DIFFUSE)
+                    out[o, v, k] = renderer.render(*camera, light=light)[0]
+    return out
+
+
+def cached_lit(cache: Path, specs: Sequence[ObjectSpec], views: RenderedViews, seed: int, variants: int
+               ) -> np.ndarray:
+    """``render_lit`` of ``views``' cameras memoised in an ``.npz`` file."""
+    cache = Path(cache)
+    expected = (*views.cameras.shape[:2], variants, *views.rgb.shape[2:])
+    if cache.is_file():
+        lit = np.load(cache)["rgb"]
+        if lit.shape == expected:
+            return lit
+    lit = render_lit(specs, views.cameras, views.rgb.shape[2], seed, variants)
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(cache, rgb=lit)
+    return lit
+
+
+@dataclass(frozen=True)
+class RobotCrops:
+    """Views as a robot's crops: a view's colours come from the clean render or one of its ``lit`` variants
+    (O, V, L, S, S, 3) with equal odds, then ``robot_crop`` applies ``augmentation`` (the unaugmented view
+    where that leaves an object the pipeline would refuse, e.g. too small)."""
+
+    lit: np.ndarray
+    augmentation: CropAugmentation = CropAugmentation()
+
+    def view(self, views: RenderedViews, o: int, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """(rgb, mask) of view ``k`` of object ``o``."""
+        variant = int(rng.integers(self.lit.shape[2] + 1))
+        rgb = views.rgb[o, k] if variant == 0 else self.lit[o, k, variant - 1]
+        crop, mask = robot_crop(rgb, views.mask[o, k], rng, self.augmentation)
+        try:
+            check_object_mask(mask, "augmented")
+        except PreprocessingError:
+            return rgb, views.mask[o, k]
+        return crop, mask
+
+
 @dataclass(frozen=True)
 class PairBatch:
     """B view pairs: ``reference``/``target`` (B, 3, r, r) in [-1, 1], true relative ``pose`` (B, 3)
@@ -87,12 +146,20 @@ class PairBatch:
 
 def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: np.ndarray,
                target_index: np.ndarray, downsample: Callable[[torch.Tensor], torch.Tensor],
-               window_scales: np.ndarray | float = 1.5) -> PairBatch:
-    """Preprocess each pair as a two-view set (``preprocess_views``) and downsample to model size."""
+               window_scales: np.ndarray | float = 1.5, crops: RobotCrops | None = None,
+               rng: np.random.Generator | None = None) -> PairBatch:
+    """Preprocess each pair as a two-view set (``preprocess_views``) and downsample to model size; with
+    ``crops``, each view is first made a robot's crop (drawn from ``rng``)."""
     scales = np.broadcast_to(np.asarray(window_scales, dtype=np.float64), object_index.shape)
+    if crops is not None and rng is None:
+        raise ValueError("robot crops need a random generator")
     images = []
     for o, a, b, scale in zip(object_index, reference_index, target_index, scales):
-        pair = [ViewInput(views.rgb[o, k], views.mask[o, k].astype(np.uint8) * 255) for k in (a, b)]
+        if crops is None:
+            pair = [ViewInput(views.rgb[o, k], views.mask[o, k].astype(np.uint8) * 255) for k in (a, b)]
+        else:
+            pair = [ViewInput(rgb, mask.astype(np.uint8) * 255)
+                    for rgb, mask in (crops.view(views, o, k, rng) for k in (a, b))]
         images.append(preprocess_views(pair, window_scale=float(scale)).images)
     small = downsample(torch.cat(images))
     small = small.reshape(len(images), 2, *small.shape[1:])
@@ -120,14 +187,14 @@ class PairPool:
     FIELDS = ("reference", "target", "pose", "reference_view")
 
     def __init__(self, views: RenderedViews, downsample: Callable[[torch.Tensor], torch.Tensor],
-                 capacity: int, refresh: int, window_scale_range: tuple[float, float]):
-        self.views, self.downsample = views, downsample
+                 capacity: int, refresh: int, window_scale_range: tuple[float, float], crops: RobotCrops | None = None):
+        self.views, self.downsample, self.crops = views, downsample, crops
         self.capacity, self.refresh, self.window_scale_range = capacity, refresh, window_scale_range
         self.tensors: dict[str, torch.Tensor] = {}
 
     def _fresh(self, rng: np.random.Generator, count: int) -> dict[str, torch.Tensor]:
         scales = rng.uniform(*self.window_scale_range, size=count)
-        batch = make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales)
+        batch = make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales, self.crops, rng)
         return {name: getattr(batch, name) for name in self.FIELDS}
 
     def fill(self, rng: np.random.Generator, count: int) -> None:

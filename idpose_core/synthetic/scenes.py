@@ -5,8 +5,8 @@ bounding box fits inside a sphere of ``OBJECT_RADIUS``; a camera at ``CAMERA_RAD
 field of view (the paper's ABO protocol) then always sees the whole object. Cameras sit at absolute
 spherical coordinates ``(polar, azimuth, radius)`` around the origin (world up +z, polar 0 above
 the object), look at the origin with no roll, and render on a white background with the object
-mask taken from pybullet's segmentation buffer. Light is fixed in the world, so a render is a
-function of the camera pose alone.
+mask taken from pybullet's segmentation buffer. Light is fixed in the world (``TRAINING_LIGHT`` unless a
+``Light`` is given), so a render is a function of the camera pose and that light.
 """
 from __future__ import annotations
 
@@ -27,8 +27,31 @@ from idpose_core.spherical import spherical_to_cartesian
 CAMERA_RADIUS = 2.0
 OBJECT_RADIUS = 0.9
 FOV_DEG = 60.0
-LIGHT_DIRECTION = (0.5, -0.7, 1.0)
 DATA_PATH = Path(pybullet_data.getDataPath())
+
+
+@dataclass(frozen=True)
+class Light:
+    """TinyRenderer's light: direction (towards the light, world frame), ambient, diffuse and specular shares,
+    cast shadows or not."""
+
+    direction: tuple[float, float, float]
+    ambient: float
+    diffuse: float
+    shadow: bool
+    specular: float = 0.05
+
+
+TRAINING_LIGHT = Light((0.5, -0.7, 1.0), ambient=0.6, diffuse=0.5, shadow=False, specular=0.0)
+"""The light of the white-background scenes: the demo model's clean training views and the plain bags."""
+
+
+def random_light(rng: np.random.Generator, elevation_deg: tuple[float, float] = (35.0, 75.0),
+                 ambient: tuple[float, float] = (0.5, 0.7), diffuse: tuple[float, float] = (0.4, 0.6)) -> Light:
+    """A light from a random direction ``elevation_deg`` above the horizon, with shadows (a room's lamp)."""
+    elevation, direction = np.radians(rng.uniform(*elevation_deg)), rng.uniform(0.0, 2.0 * math.pi)
+    return Light((float(np.cos(elevation) * np.cos(direction)), float(np.cos(elevation) * np.sin(direction)),
+                  float(np.sin(elevation))), float(rng.uniform(*ambient)), float(rng.uniform(*diffuse)), True)
 
 
 @dataclass(frozen=True)
@@ -191,9 +214,9 @@ class SceneRenderer(PybulletClient):
         super().__init__()
         add_object(self._client, spec)
 
-    def render(self, polar: float, azimuth: float, radius: float = CAMERA_RADIUS, roll: float = 0.0
-               ) -> tuple[np.ndarray, np.ndarray]:
-        """RGB uint8 (H, W, 3) with white background and foreground mask bool (H, W).
+    def render(self, polar: float, azimuth: float, radius: float = CAMERA_RADIUS, roll: float = 0.0,
+               light: Light = TRAINING_LIGHT) -> tuple[np.ndarray, np.ndarray]:
+        """RGB uint8 (H, W, 3) with white background and foreground mask bool (H, W), under ``light``.
 
         ``roll`` (radians) turns the camera about its optical axis: its optical frame is the upright
         one's times ``rz(roll)`` (``idpose_core.gravity``), as ``rolled_optical_frames`` gives it.
@@ -210,8 +233,9 @@ class SceneRenderer(PybulletClient):
         size = self.image_size
         _, _, rgba, _, segmentation = pybullet.getCameraImage(
             size, size, viewMatrix=view, projectionMatrix=projection,
-            renderer=pybullet.ER_TINY_RENDERER, lightDirection=list(LIGHT_DIRECTION),
-            lightAmbientCoeff=0.6, lightDiffuseCoeff=0.5, lightSpecularCoeff=0.0, shadow=0,
+            renderer=pybullet.ER_TINY_RENDERER, lightDirection=list(light.direction),
+            lightAmbientCoeff=light.ambient, lightDiffuseCoeff=light.diffuse, lightSpecularCoeff=light.specular,
+            shadow=int(light.shadow),
             physicsClientId=self._client)
         rgb = np.asarray(rgba, dtype=np.uint8).reshape(size, size, 4)[..., :3].copy()
         mask = np.asarray(segmentation).reshape(size, size) >= 0

@@ -20,12 +20,15 @@ import pybullet
 from idpose_core.synthetic.scenes import (
     DATA_PATH,
     OBJECT_RADIUS,
+    TRAINING_LIGHT,
+    Light,
     ObjectSpec,
     Part,
     PybulletClient,
     _part_vertices,
     add_object,
     normalisation,
+    random_light,
 )
 
 TARGET_RADIUS = 0.1  # m: the target fits a ball of this radius (a 20 cm object)
@@ -54,16 +57,6 @@ class Placement:
     centre: tuple[float, float, float]
     radius: float
     yaw_deg: float = 0.0
-
-
-@dataclass(frozen=True)
-class Light:
-    """TinyRenderer's light: direction (towards the light), ambient and diffuse shares, cast shadows or not."""
-
-    direction: tuple[float, float, float]
-    ambient: float
-    diffuse: float
-    shadow: bool
 
 
 @dataclass(frozen=True)
@@ -128,13 +121,15 @@ def _backdrop(rng: np.random.Generator, table_top: float, camera_azimuth: float)
 
 
 def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: float,
-                  challenge: str = "clutter") -> TabletopLayout:
+                  challenge: str = "clutter", random_lighting: bool = True) -> TabletopLayout:
     """A seeded scene around ``target``: 2-4 distractors (one close behind the target as seen from azimuth
     ``behind_azimuth + pi``, the others 0.2-0.5 m away, none overlapping), random textures and light.
 
     ``challenge`` (``CHALLENGES``): "parts" turns the target's front (+x) towards ``behind_azimuth``;
     "touching" puts the first distractor, a box, against the target's side as seen from there; "backdrop"
     adds a panel 10-30 cm behind the target; "clutter" and "off_centre" (a matter of the camera) add nothing.
+    ``random_lighting`` False lights the scene with ``TRAINING_LIGHT`` (the light is drawn either way, so the
+    rest of the layout is the same).
     """
     if challenge not in CHALLENGES:
         raise ValueError(f"challenge must be one of {', '.join(CHALLENGES)}, got {challenge!r}")
@@ -165,9 +160,9 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
         placed.append(Placement(spec, (x, y, z), radius, float(rng.uniform(0.0, 360.0))))
     if challenge == "backdrop":
         placed.append(_backdrop(rng, table_top, behind_azimuth))
-    elevation, direction = rng.uniform(math.radians(35), math.radians(75)), rng.uniform(0.0, 2.0 * math.pi)
-    light = Light((math.cos(elevation) * math.cos(direction), math.cos(elevation) * math.sin(direction),
-                   math.sin(elevation)), float(rng.uniform(0.5, 0.7)), float(rng.uniform(0.4, 0.6)), True)
+    light = random_light(rng)
+    if not random_lighting:
+        light = TRAINING_LIGHT
     yaw = math.degrees(behind_azimuth) if challenge == "parts" else 0.0
     walls = tuple(WALL_TEXTURES[int(i)] for i in rng.integers(0, len(WALL_TEXTURES), size=4))
     return TabletopLayout(
@@ -232,7 +227,7 @@ class TabletopRenderer(PybulletClient):
         _, _, rgba, depth_buffer, segmentation = pybullet.getCameraImage(
             size, size, viewMatrix=view, projectionMatrix=projection, renderer=pybullet.ER_TINY_RENDERER,
             lightDirection=list(light.direction), lightAmbientCoeff=light.ambient, lightDiffuseCoeff=light.diffuse,
-            lightSpecularCoeff=0.05, shadow=int(light.shadow), physicsClientId=self._client)
+            lightSpecularCoeff=light.specular, shadow=int(light.shadow), physicsClientId=self._client)
         rgb = np.asarray(rgba, dtype=np.uint8).reshape(size, size, 4)[..., :3].copy()
         buffer = np.asarray(depth_buffer, dtype=np.float64).reshape(size, size)
         depth = self.far * self.near / (self.far - (self.far - self.near) * buffer)

@@ -55,6 +55,7 @@ GRAVITY = 9.80665
 LINK_FROM_IMU = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, -0.01], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 OBJECT_SETS = {"demo": demo_objects, "unseen": unseen_objects, "textured": textured_objects}
 SCENES = ("plain", "tabletop")
+LIGHTS = ("random", "training")
 TABLETOP_SIZE = 320  # px: the target covers about a sixth of the width
 
 
@@ -62,7 +63,8 @@ TABLETOP_SIZE = 320  # px: the target covers about a sixth of the width
 class SyntheticBagOptions:
     """What a synthetic bag holds: ``views`` views of one object of ``object_set`` (``object_name``, default the
     set's first) on a ``scene``, cameras drawn from ``seed`` and each rolled by up to ``roll_deg``; images of
-    ``size`` px (default 256 plain, ``TABLETOP_SIZE`` tabletop), depth as ``depth_format``, in ``storage``."""
+    ``size`` px (default 256 plain, ``TABLETOP_SIZE`` tabletop), depth as ``depth_format``, in ``storage``; a
+    tabletop scene lit by a random lamp with shadows (``light`` "random") or by the white scenes' light ("training")."""
 
     storage: str = "mcap"
     object_set: str = "demo"
@@ -73,6 +75,7 @@ class SyntheticBagOptions:
     scene: str = "plain"
     roll_deg: float = 0.0
     depth_format: str = "16UC1"
+    light: str = "random"
 
     def check(self) -> None:
         """BagError naming the first option out of range."""
@@ -84,6 +87,8 @@ class SyntheticBagOptions:
             raise BagError(f"views must be at least 1, got {self.views}")
         if self.size is not None and self.size < 8:
             raise BagError(f"size must be at least 8 pixels, got {self.size}")
+        if self.light not in LIGHTS:
+            raise BagError(f"light must be one of {', '.join(LIGHTS)}, got {self.light!r}")
         if not 0.0 <= self.roll_deg <= 180.0:
             raise BagError(f"roll must be in [0, 180] degrees, got {self.roll_deg}")
 
@@ -172,14 +177,14 @@ def write_image(bag: BagWriter, topic: str, stamp: int, message: Image) -> None:
 
 
 def render_frames(scene: str, spec: ObjectSpec, world_from_optical: np.ndarray, spheres: np.ndarray, rolls: np.ndarray,
-                  size: int, rng: np.random.Generator) -> list[Frame]:
+                  size: int, rng: np.random.Generator, light: str = "random") -> list[Frame]:
     """Every view of the bag: the object alone on white, or on a table among others (layout drawn from ``rng``)."""
     if scene == "plain":
         with SceneRenderer(spec, image_size=size) as renderer:
             renders = [renderer.render(*sphere, roll=float(roll))
                        for sphere, roll in zip(tqdm(spheres, desc=f"rendering {spec.name}", unit="view"), rolls)]
         return [Frame(rgb, None, mask) for rgb, mask in renders]
-    layout = random_layout(spec, rng, behind_azimuth=float(spheres[0, 1]))
+    layout = random_layout(spec, rng, behind_azimuth=float(spheres[0, 1]), random_lighting=light == "random")
     with TabletopRenderer(layout, image_size=size, fov_deg=FOV_DEG) as renderer:
         renders = [renderer.render(frame) for frame in tqdm(world_from_optical, desc=f"rendering {spec.name}",
                                                               unit="view")]
@@ -207,7 +212,7 @@ def make_bag(out: Path, options: SyntheticBagOptions = SyntheticBagOptions()) ->
     rolls = np.radians(rng.uniform(-roll_deg, roll_deg, size=views)) if roll_deg > 0 else np.zeros(views)
     size = size or (256 if scene == "plain" else TABLETOP_SIZE)
     world_from_optical = rolled_optical_frames(spheres, rolls)
-    frames = render_frames(scene, spec, world_from_optical, spheres, rolls, size, rng)
+    frames = render_frames(scene, spec, world_from_optical, spheres, rolls, size, rng, options.light)
     noise = np.random.default_rng([seed, 1])
     with BagWriter(out, storage) as bag:
         write_tf(bag, START_NS - STOP_NS, [(LINK, OPTICAL, LINK_FROM_OPTICAL), (LINK, IMU, LINK_FROM_IMU)],
