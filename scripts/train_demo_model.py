@@ -8,7 +8,7 @@ inversion check (RotAcc on held-out views) to ``curve.csv`` and finally writes t
 ``solver_defaults.json`` and ``training.json`` into --out.
 
 Two phases in one run: ``--minutes`` on clean renders, then ``--robot-minutes`` on robot crops (the same
-cameras also rendered under random lights with shadows, and each view of a pair augmented by
+cameras also rendered under random lamps with shadows, and the reference of each pair augmented by
 ``idpose_core.demo_model.robot_crops``), its learning rate warmed up and decayed again. ``--init-from`` a
 model folder skips the clean phase and starts the robot phase from those weights.
 
@@ -67,8 +67,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--minutes", type=float, default=85.0, help="wall-time budget of the clean phase")
     parser.add_argument("--robot-minutes", type=float, default=60.0,
                         help="wall-time budget of the robot-crop phase that follows (0: none)")
-    parser.add_argument("--robot-lr", type=float, default=4e-4, help="peak learning rate of the robot-crop phase")
-    parser.add_argument("--lit-variants", type=int, default=2, help="random-light renders per training camera")
+    parser.add_argument("--robot-lr", type=float, default=1e-4, help="peak learning rate of the robot-crop phase")
+    parser.add_argument("--lamps", type=int, default=4, help="random lamps per object the training cameras are "
+                                                             "rendered under again")
     parser.add_argument("--init-from", type=Path, default=None,
                         help="a model folder: skip the clean phase and start the robot phase from its weights")
     parser.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (0: budget only)")
@@ -244,8 +245,8 @@ def main() -> None:
     clean_budget = 0.0 if args.init_from is not None else args.minutes * 60.0
     robot_budget = args.robot_minutes * 60.0
     budget = clean_budget + robot_budget
-    crops = RobotCrops(cached_lit(args.work_dir / f"lit_{args.seed}_{args.lit_variants}.npz", demo_objects(), train,
-                                  args.seed + 2000, args.lit_variants)) if robot_budget > 0 else None
+    crops = RobotCrops(cached_lit(args.work_dir / f"lamps_{args.seed}_{args.lamps}.npz", demo_objects(), train,
+                                  args.seed + 2000, args.lamps)) if robot_budget > 0 else None
     started = time.monotonic() - elapsed
     last_checkpoint = last_check = time.monotonic()
     gaps: dict[int, float] = {}
@@ -324,8 +325,9 @@ def main() -> None:
         "initial_weights": None if args.init_from is None else {
             "folder": str(args.init_from), "training": json.loads((args.init_from / "training.json").read_text())
             if (args.init_from / "training.json").is_file() else None},
-        "robot_crops": None if crops is None else {"lit_variants": args.lit_variants,
-                                                   "augmentation": asdict(crops.augmentation)},
+        "robot_crops": None if crops is None else {"lamps_per_object": args.lamps, "other_lamp": crops.other_lamp,
+                                                   "reference": asdict(crops.reference),
+                                                   "target": asdict(crops.target)},
         "data": {"objects": list(train.names), "train_views_per_object": train.views_per_object,
                  "heldout_views_per_object": heldout.views_per_object, "image_size": args.image_size,
                  "polar_deg": [30, 150], "fov_deg": 60},

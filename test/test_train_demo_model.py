@@ -44,14 +44,15 @@ def test_the_robot_phase_starts_from_given_weights_on_lit_augmented_crops(tmp_pa
     clean = tmp_path / "clean"
     assert train(tmp_path / "work_clean", clean, 2).returncode == 0
     out = tmp_path / "robot"
-    robot = train(tmp_path / "work_robot", out, 3, "--init-from", str(clean), "--lit-variants", "1")
+    robot = train(tmp_path / "work_robot", out, 3, "--init-from", str(clean), "--lamps", "1")
     assert robot.returncode == 0, robot.stderr[-2000:]
     assert "robot phase" in robot.stderr
-    lit = np.load(tmp_path / "work_robot" / "lit_0_1.npz")["rgb"]
+    lit = np.load(tmp_path / "work_robot" / "lamps_0_1.npz")["rgb"]
     plain = np.load(tmp_path / "work_robot" / "train_0.npz")["rgb"]
     assert lit.shape == (6, 3, 1, 32, 32, 3) and not np.array_equal(lit[:, :, 0], plain)  # other lights
     training = json.loads((out / "training.json").read_text())
     assert training["initial_weights"]["training"]["steps"] == 2
-    assert training["robot_crops"]["lit_variants"] == 1 and training["robot_crops"]["augmentation"]["clean"] > 0
+    crops = training["robot_crops"]
+    assert crops["lamps_per_object"] == 1 and crops["reference"]["occluder"] > 0 == crops["target"]["occluder"]
     assert training["steps"] == 3
     assert DemoPredictor.from_pretrained(out).model.config.block_out_channels == (8, 16)

@@ -4,7 +4,8 @@ A robot sees the object from farther or nearer than its partner view, under a wh
 own, with shadows cast across it, at a lower resolution and blurred, partly hidden by something in front or with
 a neighbour taken into its mask, its mask's rim carrying a band of the table, or cut by the image border. Each
 effect here is a pure function of an (S, S, 3) uint8 render on white and its (S, S) bool mask; ``robot_crop``
-draws a random combination of them. The textures it paints (rims, occluders) are random colour fields, not the
+draws a random combination of them, with a ``Tone`` (white balance, exposure, gamma) that the views of one scene
+share. The textures it paints (rims, occluders) are random colour fields, not the
 scenes' own textures, so that training does not learn the test scenes' tables.
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 class CropAugmentation:
     """How often each effect is applied to a view (``clean``: the share left exactly as rendered) and its range."""
 
-    clean: float = 0.25
+    clean: float = 0.4
     scale: float = 0.5
     scale_range: tuple[float, float] = (0.75, 1.3)  # zoom about the object: a camera nearer or farther
     colour: float = 0.8
@@ -34,6 +35,20 @@ class CropAugmentation:
     border_cut: tuple[float, float] = (0.1, 0.35)  # of the object's extent lost past the border
     noise: float = 0.3
     noise_sd: tuple[float, float] = (2.0, 6.0)  # grey levels
+
+
+@dataclass(frozen=True)
+class Tone:
+    """A camera's colour rendering: per-channel ``gains`` (3,) (white balance times exposure), then ``gamma``."""
+
+    gains: tuple[float, float, float]
+    gamma: float
+
+
+def random_tone(rng: np.random.Generator) -> Tone:
+    """Exposure 0.7-1.3, white balance within about 8 % per channel, gamma 0.8-1.25."""
+    gains = rng.uniform(0.7, 1.3) * rng.normal(1.0, 0.08, size=3)
+    return Tone(tuple(float(g) for g in gains), float(rng.uniform(0.8, 1.25)))
 
 
 def colour_field(rng: np.random.Generator, size: int) -> np.ndarray:
@@ -61,10 +76,10 @@ def zoom(rgb: np.ndarray, mask: np.ndarray, factor: float) -> tuple[np.ndarray, 
     return warped, warped_mask
 
 
-def recolour(rgb: np.ndarray, gains: np.ndarray, gamma: float) -> np.ndarray:
-    """Per-channel ``gains`` (3,) (white balance times exposure), then ``gamma``."""
-    scaled = np.clip(rgb.astype(np.float32) * gains / 255.0, 0.0, 1.0)
-    return (255.0 * scaled ** gamma).astype(np.uint8)
+def recolour(rgb: np.ndarray, tone: Tone) -> np.ndarray:
+    """The image as a camera of ``tone`` renders it."""
+    scaled = np.clip(rgb.astype(np.float32) * np.asarray(tone.gains, np.float32) / 255.0, 0.0, 1.0)
+    return (255.0 * scaled ** tone.gamma).astype(np.uint8)
 
 
 def cast_shadow(rgb: np.ndarray, mask: np.ndarray, rng: np.random.Generator, strength: float) -> np.ndarray:
@@ -142,8 +157,10 @@ def border_cut(mask: np.ndarray, rng: np.random.Generator, share: float) -> np.n
 
 
 def robot_crop(rgb: np.ndarray, mask: np.ndarray, rng: np.random.Generator,
-               augmentation: CropAugmentation = CropAugmentation()) -> tuple[np.ndarray, np.ndarray]:
-    """A random robot's version of a clean view: (rgb (S, S, 3) uint8 on white, mask (S, S) bool)."""
+               augmentation: CropAugmentation = CropAugmentation(), tone: Tone | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """A random robot's version of a clean view: (rgb (S, S, 3) uint8 on white, mask (S, S) bool). ``tone``: the
+    scene's camera tone, applied with ``augmentation.colour``'s odds (None: drawn here)."""
     a = augmentation
     if not mask.any() or rng.random() < a.clean:
         return rgb, mask
@@ -156,8 +173,7 @@ def robot_crop(rgb: np.ndarray, mask: np.ndarray, rng: np.random.Generator,
     if rng.random() < a.occluder:
         rgb, mask = occlude(rgb, mask, rng)
     if rng.random() < a.colour:
-        gains = rng.uniform(0.7, 1.3) * rng.normal(1.0, 0.08, size=3)
-        rgb = recolour(rgb, gains.astype(np.float32), float(rng.uniform(0.8, 1.25)))
+        rgb = recolour(rgb, tone or random_tone(rng))
     if rng.random() < a.shadow:
         rgb = cast_shadow(rgb, mask, rng, float(rng.uniform(*a.shadow_strength)))
     if rng.random() < a.blur:

@@ -4,8 +4,8 @@ Views are rendered once per object from random cameras (``random_camera_spheres`
 60 deg FOV) and cached as ``.npz``. A pair (reference, target) of the same object goes through the
 pipeline's own ``preprocess_views`` (one window for the pair, white background, 256 px) and the
 model's ``downsample``, exactly what the model sees at inference, with the window scale jittered. For robot
-scenes (``RobotCrops``) each view of a pair is drawn from renders of its camera under random lights and goes
-through ``robot_crop``'s augmentation first.
+scenes (``RobotCrops``) a pair is drawn from renders of its cameras under one of the object's random lamps and
+goes through ``robot_crop``'s augmentation first.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from idpose_core.demo_model.robot_crops import CropAugmentation, robot_crop
+from idpose_core.demo_model.robot_crops import CropAugmentation, Tone, random_tone, robot_crop
 from idpose_core.preprocessing import PreprocessingError, check_object_mask, preprocess_views
 from idpose_core.spherical import relative
 from idpose_core.synthetic.scenes import ObjectSpec, SceneRenderer, random_camera_spheres, random_light
@@ -78,50 +78,68 @@ LIT_AMBIENT = (0.3, 0.7)
 LIT_DIFFUSE = (0.3, 0.7)
 
 
-def render_lit(specs: Sequence[ObjectSpec], cameras: np.ndarray, image_size: int, seed: int, variants: int
+def render_lit(specs: Sequence[ObjectSpec], cameras: np.ndarray, image_size: int, seed: int, lights: int
                ) -> np.ndarray:
-    """Each object's cameras (O, V, 3) rendered again under ``variants`` random lights with shadows each, one
-    light drawn per render: (O, V, variants, S, S, 3) uint8 (the masks are the clean renders')."""
+    """Each object's cameras (O, V, 3) rendered again under ``lights`` random lamps with shadows, each lamp
+    fixed in the object's world as in a room: (O, V, lights, S, S, 3) uint8 (the masks are the clean renders')."""
     rng = np.random.default_rng(seed)
-    out = np.empty((*cameras.shape[:2], variants, image_size, image_size, 3), np.uint8)
-    for o, spec in enumerate(tqdm(specs, desc=f"render {variants} lit variants/view", unit="object")):
+    out = np.empty((*cameras.shape[:2], lights, image_size, image_size, 3), np.uint8)
+    for o, spec in enumerate(tqdm(specs, desc=f"render under {lights} lamps/object", unit="object")):
+        lamps = [random_light(rng, LIT_ELEVATION_DEG, LIT_AMBIENT, LIT_DIFFUSE) for _ in range(lights)]
         with SceneRenderer(spec, image_size) as renderer:
             for v, camera in enumerate(cameras[o]):
-                for k in range(variants):
-                    light = random_light(rng, LIT_ELEVATION_DEG, LIT_AMBIENT, LIT_DIFFUSE)
-                    out[o, v, k] = renderer.render(*camera, light=light)[0]
+                for k, lamp in enumerate(lamps):
+                    out[o, v, k] = renderer.render(*camera, light=lamp)[0]
     return out
 
 
-def cached_lit(cache: Path, specs: Sequence[ObjectSpec], views: RenderedViews, seed: int, variants: int
+def cached_lit(cache: Path, specs: Sequence[ObjectSpec], views: RenderedViews, seed: int, lights: int
                ) -> np.ndarray:
     """``render_lit`` of ``views``' cameras memoised in an ``.npz`` file."""
     cache = Path(cache)
-    expected = (*views.cameras.shape[:2], variants, *views.rgb.shape[2:])
+    expected = (*views.cameras.shape[:2], lights, *views.rgb.shape[2:])
     if cache.is_file():
         lit = np.load(cache)["rgb"]
         if lit.shape == expected:
             return lit
-    lit = render_lit(specs, views.cameras, views.rgb.shape[2], seed, variants)
+    lit = render_lit(specs, views.cameras, views.rgb.shape[2], seed, lights)
     cache.parent.mkdir(parents=True, exist_ok=True)
     np.savez(cache, rgb=lit)
     return lit
 
 
+TARGET_AUGMENTATION = CropAugmentation(scale=0.0, shadow=0.0, occluder=0.0, rim=0.0, border=0.0)
+"""The target of a training pair keeps its geometry (the model predicts it: what it cannot know from the
+reference and the pose, such as an occluder, would teach it to ignore the pose); it shares the camera's
+tone and lamp, and is blurred and noisy like the reference."""
+
+
 @dataclass(frozen=True)
 class RobotCrops:
-    """Views as a robot's crops: a view's colours come from the clean render or one of its ``lit`` variants
-    (O, V, L, S, S, 3) with equal odds, then ``robot_crop`` applies ``augmentation`` (the unaugmented view
-    where that leaves an object the pipeline would refuse, e.g. too small)."""
+    """Pairs as a robot's crops: both views under the clean light or one of the object's ``lit`` lamps
+    (O, V, L, S, S, 3) with equal odds (``other_lamp``: the target under another one), one camera tone, then
+    ``robot_crop`` with ``reference`` and ``target`` augmentation (the unaugmented view where that leaves an
+    object the pipeline would refuse, e.g. too small)."""
 
     lit: np.ndarray
-    augmentation: CropAugmentation = CropAugmentation()
+    reference: CropAugmentation = CropAugmentation()
+    target: CropAugmentation = TARGET_AUGMENTATION
+    other_lamp: float = 0.2
 
-    def view(self, views: RenderedViews, o: int, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """(rgb, mask) of view ``k`` of object ``o``."""
-        variant = int(rng.integers(self.lit.shape[2] + 1))
-        rgb = views.rgb[o, k] if variant == 0 else self.lit[o, k, variant - 1]
-        crop, mask = robot_crop(rgb, views.mask[o, k], rng, self.augmentation)
+    def pair(self, views: RenderedViews, o: int, a: int, b: int, rng: np.random.Generator
+             ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(rgb, mask) of views ``a`` (reference) and ``b`` (target) of object ``o``, as one robot saw them."""
+        tone = random_tone(rng)
+        lamp = int(rng.integers(self.lit.shape[2] + 1))
+        target_lamp = int(rng.integers(self.lit.shape[2] + 1)) if rng.random() < self.other_lamp else lamp
+        return [self.view(views, o, a, lamp, self.reference, tone, rng),
+                self.view(views, o, b, target_lamp, self.target, tone, rng)]
+
+    def view(self, views: RenderedViews, o: int, k: int, lamp: int, augmentation: CropAugmentation, tone: Tone,
+             rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """(rgb, mask) of view ``k`` of object ``o`` under ``lamp`` (0: the clean light) and the camera's ``tone``."""
+        rgb = views.rgb[o, k] if lamp == 0 else self.lit[o, k, lamp - 1]
+        crop, mask = robot_crop(rgb, views.mask[o, k], rng, augmentation, tone)
         try:
             check_object_mask(mask, "augmented")
         except PreprocessingError:
@@ -158,8 +176,7 @@ def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: 
         if crops is None:
             pair = [ViewInput(views.rgb[o, k], views.mask[o, k].astype(np.uint8) * 255) for k in (a, b)]
         else:
-            pair = [ViewInput(rgb, mask.astype(np.uint8) * 255)
-                    for rgb, mask in (crops.view(views, o, k, rng) for k in (a, b))]
+            pair = [ViewInput(rgb, mask.astype(np.uint8) * 255) for rgb, mask in crops.pair(views, o, a, b, rng)]
         images.append(preprocess_views(pair, window_scale=float(scale)).images)
     small = downsample(torch.cat(images))
     small = small.reshape(len(images), 2, *small.shape[1:])
