@@ -7,12 +7,13 @@ shows a progress bar with the loss and the true-vs-wrong-pose loss gap, logs the
 inversion check (RotAcc on held-out views) to ``curve.csv`` and finally writes the EMA weights,
 ``solver_defaults.json`` and ``training.json`` into --out.
 
-Two phases in one run: ``--minutes`` on clean renders, then ``--robot-minutes`` on robot crops (the same
-cameras also rendered under random lamps with shadows, and the reference of each pair augmented by
+``--minutes`` on clean renders, then optionally ``--robot-minutes`` on robot crops (the same cameras also
+rendered under random lamps with shadows, and the reference of each pair augmented by
 ``idpose_core.demo_model.robot_crops``), its learning rate warmed up and decayed again. ``--init-from`` a
 model folder skips the clean phase and starts the robot phase from those weights.
 
-    python scripts/train_demo_model.py                    # 85 + 60 minutes: 2 cores, nothing else running
+    python scripts/train_demo_model.py --minutes 85       # the shipped model: 2 cores, nothing else running
+    python scripts/train_demo_model.py --init-from idpose_core/assets/demo_model --robot-minutes 25 --out robot_model
 """
 from __future__ import annotations
 
@@ -65,8 +66,8 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--work-dir", type=Path, default=Path.home() / ".cache" / "idpose_demo_model",
                         help="render cache, checkpoint and curve.csv (not in git)")
     parser.add_argument("--minutes", type=float, default=85.0, help="wall-time budget of the clean phase")
-    parser.add_argument("--robot-minutes", type=float, default=60.0,
-                        help="wall-time budget of the robot-crop phase that follows (0: none)")
+    parser.add_argument("--robot-minutes", type=float, default=0.0,
+                        help="wall-time budget of a robot-crop phase after the clean one (default 0: none)")
     parser.add_argument("--robot-lr", type=float, default=1e-4, help="peak learning rate of the robot-crop phase")
     parser.add_argument("--lamps", type=int, default=4, help="random lamps per object the training cameras are "
                                                              "rendered under again")

@@ -44,7 +44,8 @@ def test_the_robot_phase_starts_from_given_weights_on_lit_augmented_crops(tmp_pa
     clean = tmp_path / "clean"
     assert train(tmp_path / "work_clean", clean, 2).returncode == 0
     out = tmp_path / "robot"
-    robot = train(tmp_path / "work_robot", out, 3, "--init-from", str(clean), "--lamps", "1")
+    robot = train(tmp_path / "work_robot", out, 3, "--init-from", str(clean), "--lamps", "1",
+                  "--robot-minutes", "30")
     assert robot.returncode == 0, robot.stderr[-2000:]
     assert "robot phase" in robot.stderr
     lit = np.load(tmp_path / "work_robot" / "lamps_0_1.npz")["rgb"]

@@ -34,7 +34,8 @@ class NodeSettings:
     """The node's own parameters (the solver's are in ``SOLVER_PARAMETERS``)."""
 
     model_path: str = field(default="", metadata=_spec(
-        "Zero-1-to-3 weights: a diffusers folder or an LDM .ckpt; empty = the embedded default model",
+        "Zero-1-to-3 weights: a diffusers folder or an LDM .ckpt; empty = the embedded default model "
+        "(a folder scripts/train_demo_model.py wrote is a demo model too)",
         read_only=True))
     device: str = field(default="auto", metadata=_spec(
         "where the model runs (auto = cuda when available)", choices=("auto", "cpu", "cuda"), read_only=True))
