@@ -35,6 +35,6 @@ def resolve_device(device: str | torch.device) -> torch.device:
         raise DeviceUnavailable(f"device {str(device)!r} is not available: {why} (torch {torch.__version__}); "
                                 f"available: {available}")
     if resolved.index is not None and resolved.index >= torch.cuda.device_count():
-        raise DeviceUnavailable(f"device {str(device)!r} is not available: this machine has "
-                                f"{torch.cuda.device_count()} CUDA device(s); available: {available}")
+        raise DeviceUnavailable(f"device {str(device)!r} is not available: only "
+                                f"{torch.cuda.device_count()} CUDA device(s) are visible; available: {available}")
     return resolved

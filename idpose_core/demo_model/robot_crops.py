@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from idpose_core.preprocessing import bounding_box
+
 
 @dataclass(frozen=True)
 class CropAugmentation:
@@ -59,10 +61,10 @@ def colour_field(rng: np.random.Generator, size: int) -> np.ndarray:
     return np.clip(field, 0, 255).astype(np.uint8)
 
 
-def bounding_box(mask: np.ndarray) -> tuple[int, int, int, int]:
-    """(top, bottom, left, right) of the mask's pixels, bottom and right exclusive."""
-    rows, cols = np.nonzero(mask)
-    return int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
+def _box_edges(mask: np.ndarray) -> tuple[int, int, int, int]:
+    """(top, bottom, left, right) of the mask's pixels, bottom and right exclusive (``bounding_box`` as edges)."""
+    x, y, width, height = bounding_box(mask)
+    return y, y + height, x, x + width
 
 
 def zoom(rgb: np.ndarray, mask: np.ndarray, factor: float) -> tuple[np.ndarray, np.ndarray]:
@@ -84,7 +86,7 @@ def recolour(rgb: np.ndarray, tone: Tone) -> np.ndarray:
 
 def cast_shadow(rgb: np.ndarray, mask: np.ndarray, rng: np.random.Generator, strength: float) -> np.ndarray:
     """Darken the object to ``strength`` on one side of a random soft-edged line through the middle of its box."""
-    top, bottom, left, right = bounding_box(mask)
+    top, bottom, left, right = _box_edges(mask)
     angle = rng.uniform(0.0, 2.0 * np.pi)
     normal = np.array([np.cos(angle), np.sin(angle)])
     width, height = right - left, bottom - top
@@ -111,7 +113,7 @@ def degrade(rgb: np.ndarray, resolution: float, sigma: float) -> np.ndarray:
 def occlude(rgb: np.ndarray, mask: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """An ellipse on the object's outline: either something in front that the mask leaves out (a hole, white),
     or a neighbour the mask takes in (painted with a random texture and added to the mask)."""
-    top, bottom, left, right = bounding_box(mask)
+    top, bottom, left, right = _box_edges(mask)
     edge = np.argwhere(mask & ~cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool))
     y, x = edge[int(rng.integers(len(edge)))]
     extent = max(bottom - top, right - left)
@@ -142,7 +144,7 @@ def rim(rgb: np.ndarray, mask: np.ndarray, rng: np.random.Generator, pixels: int
 
 def border_cut(mask: np.ndarray, rng: np.random.Generator, share: float) -> np.ndarray:
     """The mask with ``share`` of its extent on one random side cut off, as by the image border."""
-    top, bottom, left, right = bounding_box(mask)
+    top, bottom, left, right = _box_edges(mask)
     out = mask.copy()
     side = int(rng.integers(4))
     if side == 0:
