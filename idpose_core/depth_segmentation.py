@@ -6,7 +6,8 @@ stands above it, split that into connected pieces at depth jumps (an object in f
 different piece), give a piece that does not reach the plane back to the piece it stands out in front
 of and touches (a duck's head in front of its body: a part, not an object), leave out what rises higher
 than a tabletop object can (a wall), take the target's piece (the one in the region of interest, else
-the one nearest the image centre) and let GrabCut, seeded from it, settle the boundary the depth leaves
+the one nearest the image centre), give it back its base (the bottom centimetre, under the height test's
+threshold: over its footprint, not facing up) and let GrabCut, seeded from it, settle the boundary the depth leaves
 ragged. Tolerances grow with each reading's depth, not the image's: a far wall does not loosen them.
 Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
 """
@@ -41,6 +42,14 @@ MAX_OBJECT_HEIGHT = 0.6  # m above the plane: what rises higher is the room (a w
 GRABCUT_ITERATIONS = 4
 GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
 CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
+BASE_MARGIN = 0.002  # m, or 0.4 % of the depth when larger: how far outside the piece's footprint on the plane a
+# reading may lie and still be the piece's base (the band under ``MIN_HEIGHT`` that the height test leaves out)
+FOOTPRINT_CELL = 0.001  # m: the grid the footprint is drawn on
+BASE_SLICE = 0.02  # m above the height threshold: the piece's points that draw its footprint (higher up, an
+# overhang such as a duck's head covers table that shows beneath it)
+TABLE_TILT_DEG = 35.0  # a reading whose surface tilts less than this from the plane's normal faces up: the table
+# (under a rounded bottom, inside the footprint), not the object's side or underside
+NORMAL_STEP = 2  # px either side for the surface normal's finite differences
 
 
 class DepthSegmentationError(ValueError):
@@ -189,6 +198,64 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     return labels
 
 
+def _plane_basis(plane: Plane) -> np.ndarray:
+    """(2, 3): two unit vectors spanning the plane, orthogonal to each other and to its normal."""
+    seed = np.eye(3)[int(np.argmin(np.abs(plane.normal)))]
+    first = np.cross(plane.normal, seed)
+    first /= np.linalg.norm(first)
+    return np.stack([first, np.cross(plane.normal, first)])
+
+
+def faces_up(points: np.ndarray, valid: np.ndarray, plane: Plane) -> np.ndarray:
+    """(H, W) bool: the surface at each reading tilts less than ``TABLE_TILT_DEG`` from the plane's normal
+    (finite differences ``NORMAL_STEP`` px either side; False where a neighbour has no reading)."""
+    step = NORMAL_STEP
+    across = np.zeros_like(points)
+    down = np.zeros_like(points)
+    across[:, step:-step] = points[:, 2 * step:] - points[:, :-2 * step]
+    down[step:-step] = points[2 * step:] - points[:-2 * step]
+    normal = np.cross(across, down)
+    length = np.linalg.norm(normal, axis=-1)
+    reach = np.zeros_like(valid)
+    reach[step:-step, step:-step] = (valid[2 * step:, step:-step] & valid[:-2 * step, step:-step]
+                                     & valid[step:-step, 2 * step:] & valid[step:-step, :-2 * step])
+    cosine = np.abs(normal @ plane.normal) / np.maximum(length, 1e-12)
+    return reach & (length > 0) & (cosine > math.cos(math.radians(TABLE_TILT_DEG)))
+
+
+def recover_base(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, height: np.ndarray, plane: Plane,
+                 band: np.ndarray) -> np.ndarray:
+    """The piece (H, W) bool with its base: the readings under the height test's threshold (``band`` (H, W), m)
+    whose surface does not face up (``faces_up``: the table) and that lie over the piece's footprint on the plane
+    (the convex hull, seen from above, of its points up to ``BASE_SLICE`` higher, grown by ``BASE_MARGIN``) and
+    connect to it in the image: the bottom centimetre of the object, which the height test cannot tell from the
+    table."""
+    basis = _plane_basis(plane)
+    inside = points[piece & valid & (height <= band + BASE_SLICE)] @ basis.T
+    if len(inside) < 3:
+        return piece
+    depth = points[..., 2]
+    low = valid & ~piece & (height <= band) & (height > -band) & ~faces_up(points, valid, plane)
+    margin = float(np.max(_tolerance(depth[piece & valid], BASE_MARGIN, 0.004)))
+    origin = inside.min(axis=0) - margin - FOOTPRINT_CELL
+    shape = np.ceil((inside.max(axis=0) + margin + FOOTPRINT_CELL - origin) / FOOTPRINT_CELL).astype(int) + 1
+    cells = np.round((inside - origin) / FOOTPRINT_CELL).astype(np.int32)
+    footprint = np.zeros((shape[1], shape[0]), np.uint8)
+    cv2.fillConvexPoly(footprint, cv2.convexHull(cells), 1)
+    grow = int(round(margin / FOOTPRINT_CELL))
+    footprint = cv2.dilate(footprint, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1)))
+    rows, cols = np.nonzero(low)
+    where = np.round((points[rows, cols] @ basis.T - origin) / FOOTPRINT_CELL).astype(int)
+    within = (where >= 0).all(axis=1) & (where[:, 0] < shape[0]) & (where[:, 1] < shape[1])
+    over = np.zeros_like(within)
+    over[within] = footprint[where[within, 1], where[within, 0]] > 0
+    base = np.zeros_like(piece)
+    base[rows[over], cols[over]] = True
+    count, labels = cv2.connectedComponents((piece | base).astype(np.uint8), connectivity=4)
+    kept = np.unique(labels[piece])
+    return np.isin(labels, kept[kept > 0])
+
+
 def drop_scenery(labels: np.ndarray, count: int, height: np.ndarray) -> np.ndarray:
     """The labels without the pieces that rise higher than ``MAX_OBJECT_HEIGHT`` above the plane (their
     95th-percentile height): the room, not an object on the table (a wall seen by a camera looking up past it)."""
@@ -282,7 +349,9 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
                                   _tolerance(depth, SUPPORT_HEIGHT, 0.05))
     on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
     labels = drop_scenery(labels, count, np.where(valid, height, 0.0))
-    piece = _fill_holes(target_piece(labels, count, view.roi))
+    threshold = _tolerance(depth, MIN_HEIGHT, 0.015)
+    piece = target_piece(labels, count, view.roi)
+    piece = _fill_holes(recover_base(piece, points, valid, height, plane, threshold))
     mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
     return DepthCut(mask=mask, depth_mask=piece, plane=plane)
 
