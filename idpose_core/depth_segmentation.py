@@ -37,6 +37,8 @@ SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece whose lowes
 # higher is carried by another piece
 ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
 # 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
+CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most of its points along their shared
+# edge lie this far inside the piece's footprint (a table's legs under its top; a box behind the top lies outside)
 GAP_POINTS = 400  # of each side, for the gap between two sets of points
 MAX_OBJECT_HEIGHT = 0.6  # m above the plane: what rises higher is the room (a wall), not an object on the table
 GRABCUT_ITERATIONS = 4
@@ -156,15 +158,39 @@ def _gap(front: np.ndarray, back: np.ndarray) -> float:
     return float(np.median(np.min(np.linalg.norm(front[:, None] - back[None], axis=-1), axis=1)))
 
 
+def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: np.ndarray, height: np.ndarray,
+                      points: np.ndarray, valid: np.ndarray, plane: Plane) -> list[int]:
+    """The neighbours that carry ``piece`` (its pixels ``inside``, the band around it ``ring``) from beneath: along
+    their shared edge they are lower than the piece, attached to it (within ``ATTACH_GAP``) and mostly over its
+    footprint shrunk by ``CARRIER_INSET`` (a table's legs under its top)."""
+    kernel = np.ones((3, 3), np.uint8)
+    own = inside & valid
+    if own.sum() < 3:
+        return []
+    carriers = []
+    for other in np.unique(labels[ring]):
+        if other in (0, piece):
+            continue
+        meeting = ring & (labels == other) & valid
+        edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & own
+        if not meeting.any() or not edge.any() or np.median(height[meeting]) >= np.median(height[edge]):
+            continue
+        if (_gap(points[edge], points[meeting]) < ATTACH_GAP
+                and over_footprint(points[own], points[meeting], plane, -CARRIER_INSET).mean() > 0.5):
+            carriers.append(int(other))
+    return carriers
+
+
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
-                         valid: np.ndarray, support: np.ndarray) -> np.ndarray:
+                         valid: np.ndarray, support: np.ndarray, plane: Plane) -> np.ndarray:
     """The labels with every piece that does not reach the plane (its 5th-percentile height above its median
-    ``support`` (H, W), m) merged into a neighbouring piece, larger or (standing on the plane) at least half as
-    large, that it stands out in front of and is attached to (where they meet it is nearer the camera, and its
-    edge points lie within ``ATTACH_GAP`` of the neighbour's; of several, the one with the longest shared edge):
-    a part of an object that a depth jump cut off (a duck's head and back, larger than the breast below them). A
-    piece behind its neighbour stays apart (an object partly hidden by the target), and so does one that is
-    well in front of it (a ball whose lowest visible points are high on its curve, before a box behind it)."""
+    ``support`` (H, W), m) joined to what carries it: the neighbours beneath it (``_carriers_beneath``: a table
+    top and its legs), else a neighbouring piece, larger or (standing on the plane) at least half as large, that it
+    stands out in front of and is attached to (where they meet it is nearer the camera, and its edge points lie
+    within ``ATTACH_GAP`` of the neighbour's; of several, the one with the longest shared edge): a part of an
+    object that a depth jump cut off (a duck's head and back, larger than the breast below them). A piece behind
+    its neighbour stays apart (an object partly hidden by the target), and so does one that is well in front of
+    it (a ball whose lowest visible points are high on its curve, before a box behind it)."""
     depth = np.where(valid, points[..., 2], 0.0)
     labels = labels.copy()
     kernel = np.ones((3, 3), np.uint8)
@@ -178,6 +204,14 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
             continue
         inside = labels == piece
         ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
+        carriers = _carriers_beneath(piece, inside, ring, labels, height, points, valid, plane)
+        if carriers:
+            for other in carriers:
+                labels[labels == other] = piece
+                areas[piece] += areas[other]
+                areas[other] = 0
+            standing[piece] = True
+            continue
         neighbours, shared = np.unique(labels[ring], return_counts=True)
         best, best_shared = 0, 0
         for other, length in zip(neighbours, shared):
@@ -223,6 +257,27 @@ def faces_up(points: np.ndarray, valid: np.ndarray, plane: Plane) -> np.ndarray:
     return reach & (length > 0) & (cosine > math.cos(math.radians(TABLE_TILT_DEG)))
 
 
+def over_footprint(object_points: np.ndarray, points: np.ndarray, plane: Plane, margin: float) -> np.ndarray:
+    """(M,) bool: which of ``points`` (M, 3) lie over the footprint of ``object_points`` (N >= 3, 3), the convex hull
+    of their projections onto the plane, grown by ``margin`` metres (shrunk when negative)."""
+    basis = _plane_basis(plane)
+    hull, query = object_points @ basis.T, points @ basis.T
+    reach = max(margin, 0.0) + FOOTPRINT_CELL
+    origin = hull.min(axis=0) - reach
+    shape = np.ceil((hull.max(axis=0) + reach - origin) / FOOTPRINT_CELL).astype(int) + 1
+    footprint = np.zeros((shape[1], shape[0]), np.uint8)
+    cv2.fillConvexPoly(footprint, cv2.convexHull(np.round((hull - origin) / FOOTPRINT_CELL).astype(np.int32)), 1)
+    grow = int(round(abs(margin) / FOOTPRINT_CELL))
+    if grow:
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
+        footprint = cv2.dilate(footprint, disc) if margin > 0 else cv2.erode(footprint, disc)
+    where = np.round((query - origin) / FOOTPRINT_CELL).astype(int)
+    within = (where >= 0).all(axis=1) & (where[:, 0] < shape[0]) & (where[:, 1] < shape[1])
+    over = np.zeros(len(query), bool)
+    over[within] = footprint[where[within, 1], where[within, 0]] > 0
+    return over
+
+
 def recover_base(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, height: np.ndarray, plane: Plane,
                  band: np.ndarray) -> np.ndarray:
     """The piece (H, W) bool with its base: the readings under the height test's threshold (``band`` (H, W), m)
@@ -230,25 +285,13 @@ def recover_base(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, heigh
     (the convex hull, seen from above, of its points up to ``BASE_SLICE`` higher, grown by ``BASE_MARGIN``) and
     connect to it in the image: the bottom centimetre of the object, which the height test cannot tell from the
     table."""
-    basis = _plane_basis(plane)
-    inside = points[piece & valid & (height <= band + BASE_SLICE)] @ basis.T
-    if len(inside) < 3:
+    footing = points[piece & valid & (height <= band + BASE_SLICE)]
+    if len(footing) < 3:
         return piece
-    depth = points[..., 2]
     low = valid & ~piece & (height <= band) & (height > -band) & ~faces_up(points, valid, plane)
-    margin = float(np.max(_tolerance(depth[piece & valid], BASE_MARGIN, 0.004)))
-    origin = inside.min(axis=0) - margin - FOOTPRINT_CELL
-    shape = np.ceil((inside.max(axis=0) + margin + FOOTPRINT_CELL - origin) / FOOTPRINT_CELL).astype(int) + 1
-    cells = np.round((inside - origin) / FOOTPRINT_CELL).astype(np.int32)
-    footprint = np.zeros((shape[1], shape[0]), np.uint8)
-    cv2.fillConvexPoly(footprint, cv2.convexHull(cells), 1)
-    grow = int(round(margin / FOOTPRINT_CELL))
-    footprint = cv2.dilate(footprint, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1)))
+    margin = float(np.max(_tolerance(points[..., 2][piece & valid], BASE_MARGIN, 0.004)))
     rows, cols = np.nonzero(low)
-    where = np.round((points[rows, cols] @ basis.T - origin) / FOOTPRINT_CELL).astype(int)
-    within = (where >= 0).all(axis=1) & (where[:, 0] < shape[0]) & (where[:, 1] < shape[1])
-    over = np.zeros_like(within)
-    over[within] = footprint[where[within, 1], where[within, 0]] > 0
+    over = over_footprint(footing, points[rows, cols], plane, margin)
     base = np.zeros_like(piece)
     base[rows[over], cols[over]] = True
     count, labels = cv2.connectedComponents((piece | base).astype(np.uint8), connectivity=4)
@@ -346,7 +389,7 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     above = valid & (height > _tolerance(depth, MIN_HEIGHT, 0.015))
     count, labels = _pieces(above, depth, valid)
     labels = merge_carried_pieces(labels, count, np.where(valid, height, 0.0), points, valid,
-                                  _tolerance(depth, SUPPORT_HEIGHT, 0.05))
+                                  _tolerance(depth, SUPPORT_HEIGHT, 0.05), plane)
     on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
     labels = drop_scenery(labels, count, np.where(valid, height, 0.0))
     threshold = _tolerance(depth, MIN_HEIGHT, 0.015)
