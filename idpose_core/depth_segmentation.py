@@ -39,6 +39,8 @@ ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piec
 # 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
 CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most of its points along their shared
 # edge lie this far inside the piece's footprint (a table's legs under its top; a box behind the top lies outside)
+MIN_SHARED_EDGE = 0.05  # of a carried piece's outline: it touches what carries it along more than this (a table
+# top that touches a crate behind it at one corner is not carried by the crate)
 GAP_POINTS = 400  # of each side, for the gap between two sets of points
 MAX_OBJECT_HEIGHT = 0.6  # m above the plane: what rises higher is the room (a wall), not an object on the table
 GRABCUT_ITERATIONS = 4
@@ -183,11 +185,12 @@ def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: 
 
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
                          valid: np.ndarray, support: np.ndarray, plane: Plane) -> np.ndarray:
-    """The labels with every piece that does not reach the plane (its 5th-percentile height above its median
-    ``support`` (H, W), m) joined to what carries it: the neighbours beneath it (``_carriers_beneath``: a table
-    top and its legs), else a neighbouring piece, larger or (standing on the plane) at least half as large, that it
-    stands out in front of and is attached to (where they meet it is nearer the camera, and its edge points lie
-    within ``ATTACH_GAP`` of the neighbour's; of several, the one with the longest shared edge): a part of an
+    """The labels with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
+    table top and its legs), then every piece that still does not reach the plane (its 5th-percentile height
+    above its median ``support`` (H, W), m) joined to a neighbouring piece, larger or (standing on the plane) at
+    least half as large, that it stands out in front of and is attached to (where they meet it is nearer the
+    camera, its edge points lie within ``ATTACH_GAP`` of the neighbour's, and they share more than
+    ``MIN_SHARED_EDGE`` of its outline; of several, the one with the longest shared edge): a part of an
     object that a depth jump cut off (a duck's head and back, larger than the breast below them). A piece behind
     its neighbour stays apart (an object partly hidden by the target), and so does one that is well in front of
     it (a ball whose lowest visible points are high on its curve, before a box behind it)."""
@@ -199,19 +202,22 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     for piece in np.flatnonzero(areas):
         inside = labels == piece
         standing[piece] = np.percentile(height[inside], 5) <= np.median(support[inside])
+    for piece in np.argsort(areas)[::-1]:  # what stands beneath a piece, smaller than it, joins it (its legs)
+        if piece == 0 or areas[piece] == 0:
+            continue
+        inside = labels == piece
+        ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
+        for other in _carriers_beneath(piece, inside, ring, labels, height, points, valid, plane):
+            if areas[other] < areas[piece]:
+                labels[labels == other] = piece
+                areas[piece] += areas[other]
+                areas[other] = 0
+                standing[piece] |= standing[other]
     for piece in np.argsort(areas):  # smallest first: a head joins its body before the body is judged
         if piece == 0 or areas[piece] == 0 or standing[piece]:
             continue
         inside = labels == piece
         ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
-        carriers = _carriers_beneath(piece, inside, ring, labels, height, points, valid, plane)
-        if carriers:
-            for other in carriers:
-                labels[labels == other] = piece
-                areas[piece] += areas[other]
-                areas[other] = 0
-            standing[piece] = True
-            continue
         neighbours, shared = np.unique(labels[ring], return_counts=True)
         best, best_shared = 0, 0
         for other, length in zip(neighbours, shared):
@@ -220,7 +226,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
                 continue
             edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside & valid
             behind = ring & (labels == other) & valid
-            if length <= best_shared or not edge.any() or not behind.any():
+            if length <= max(best_shared, MIN_SHARED_EDGE * ring.sum()) or not edge.any() or not behind.any():
                 continue
             if (np.median(depth[edge]) < np.median(depth[behind])
                     and _gap(points[edge], points[behind]) < ATTACH_GAP):
