@@ -21,10 +21,11 @@ what makes segmentation hard:
 Targets are the six demo objects in turn (parts: a generated head-and-body). The mask is what the
 pipeline computes from the colour image, the depth and the intrinsics (``foreground_mask``: the depth
 cut, with its fallbacks), without gravity; views where under 300 target pixels are visible are left out.
+`--depth-noise` gives the depth as a camera reads it (relative Gaussian noise, rounded to millimetres).
 Prints mean and worst IoU per row and overall (the five failure types) with the number of views, and
 writes bench/results/mask_quality_<seed>.json.
 
-    python bench/mask_quality.py [--seed 1000] [--views 8] [--size 320]
+    python bench/mask_quality.py [--seed 1000] [--views 8] [--size 320] [--depth-noise 0.003]
 """
 from __future__ import annotations
 
@@ -52,6 +53,7 @@ from idpose_core.synthetic.tabletop import (  # noqa: E402
     off_centre_camera,
     parts_target,
     random_layout,
+    sensor_depth,
 )
 from idpose_core.view_input import ViewInput  # noqa: E402
 
@@ -61,11 +63,11 @@ MIN_VISIBLE = 300  # px of the target that must be in sight
 EXTRA_ROWS = ("off_centre_roi", "crowded", "crowded_roi")  # off-centre views beside the failure types
 
 
-def challenge_view(challenge: str, index: int, seed: int, size: int,
-                   crowded: bool = False) -> tuple[ViewInput, np.ndarray] | None:
+def challenge_view(challenge: str, index: int, seed: int, size: int, crowded: bool = False,
+                   depth_noise: float = 0.0) -> tuple[ViewInput, np.ndarray] | None:
     """(the view: colour, depth, intrinsics; the target's true mask) of scene ``index`` of a failure type, or
     None when too little of the target is in sight. ``crowded`` (off-centre only): another object nearer the
-    image centre than the target."""
+    image centre than the target. ``depth_noise``: the depth as a camera reads it (``sensor_depth``)."""
     rng = np.random.default_rng([seed, CHALLENGES.index(challenge), index] + [1] * crowded)
     target = parts_target(rng) if challenge == "parts" else demo_objects()[index % len(demo_objects())]
     camera = None
@@ -79,7 +81,8 @@ def challenge_view(challenge: str, index: int, seed: int, size: int,
         frame = renderer.render(camera)
     if frame.target_mask.sum() < MIN_VISIBLE:
         return None
-    return ViewInput(frame.rgb, depth=frame.depth, intrinsics=pinhole_intrinsics(size, FOV_DEG)), frame.target_mask
+    depth = sensor_depth(frame.depth, rng, depth_noise) if depth_noise else frame.depth
+    return ViewInput(frame.rgb, depth=depth, intrinsics=pinhole_intrinsics(size, FOV_DEG)), frame.target_mask
 
 
 def with_roi(view: ViewInput, truth: np.ndarray, seed: int, index: int, crowded: bool) -> ViewInput:
@@ -96,14 +99,14 @@ def score(view: ViewInput, truth: np.ndarray, name: str, index: int) -> dict:
     return row
 
 
-def measure(seed: int, views: int, size: int) -> dict:
+def measure(seed: int, views: int, size: int, depth_noise: float = 0.0) -> dict:
     """Per failure type, and the off-centre rows with a region of interest or a crowded centre (``EXTRA_ROWS``):
     every view's IoU and mask method."""
     results: dict[str, list[dict]] = {}
     for challenge in CHALLENGES:
         results[challenge] = []
         for index in range(views):
-            scene = challenge_view(challenge, index, seed, size)
+            scene = challenge_view(challenge, index, seed, size, depth_noise=depth_noise)
             if scene is None:
                 continue
             view, truth = scene
@@ -112,7 +115,7 @@ def measure(seed: int, views: int, size: int) -> dict:
                 continue
             results.setdefault("off_centre_roi", []).append(
                 score(with_roi(view, truth, seed, index, False), truth, "off_centre_roi", index))
-            crowded = challenge_view(challenge, index, seed, size, crowded=True)
+            crowded = challenge_view(challenge, index, seed, size, crowded=True, depth_noise=depth_noise)
             if crowded is not None:
                 view, truth = crowded
                 results.setdefault("crowded", []).append(score(view, truth, "crowded", index))
@@ -131,18 +134,20 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1000, help="scene seed")
     parser.add_argument("--views", type=int, default=8, help="scenes per failure type")
     parser.add_argument("--size", type=int, default=320, help="image side (px)")
+    parser.add_argument("--depth-noise", type=float, default=0.0,
+                        help="depth noise as a share of each reading, then rounded to mm (0: exact renders)")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file (default bench/results/mask_quality_<seed>.json)")
     args = parser.parse_args()
     started = time.monotonic()
-    results = measure(args.seed, args.views, args.size)
+    results = measure(args.seed, args.views, args.size, args.depth_noise)
     table = {challenge: summary(rows) for challenge, rows in results.items() if rows}
     table["all"] = summary([row for name, rows in results.items() if name not in EXTRA_ROWS for row in rows])
     print(f"| type (seed {args.seed}) | views | mean IoU | worst IoU |\n|---|---|---|---|")
     for name, row in table.items():
         print(f"| {name} | {row['views']} | {row['mean']:.3f} | {row['worst']:.3f} |")
     out = args.out or ROOT / "bench" / "results" / f"mask_quality_{args.seed}.json"
-    out.write_text(json.dumps({"seed": args.seed, "size": args.size, "summary": table, "views": results,
+    out.write_text(json.dumps({"seed": args.seed, "size": args.size, "depth_noise": args.depth_noise, "summary": table, "views": results,
                                "seconds": time.monotonic() - started}, indent=2) + "\n")
     print(f"{time.monotonic() - started:.0f} s; {out}")
 

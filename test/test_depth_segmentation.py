@@ -134,12 +134,11 @@ def test_the_base_under_the_height_threshold_comes_back(challenge, scene, noise)
 
     from bench.mask_quality import challenge_view
     from idpose_core.preprocessing import mask_iou
+    from idpose_core.synthetic.tabletop import sensor_depth
 
     view, truth = challenge_view(challenge, scene, seed=0, size=320)
     if noise:
-        rng = np.random.default_rng(scene)
-        depth = view.depth * (1 + noise * rng.standard_normal(view.depth.shape))
-        view = dataclasses.replace(view, depth=(np.round(depth * 1000) / 1000).astype(np.float32))
+        view = dataclasses.replace(view, depth=sensor_depth(view.depth, np.random.default_rng(scene), noise))
     cut = depth_cut(view)
     assert mask_iou(cut.mask, truth) > 0.96
     assert (cut.mask & ~truth).sum() < 0.01 * truth.sum()  # the table stays out

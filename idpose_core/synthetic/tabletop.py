@@ -311,3 +311,10 @@ def loose_box(mask: np.ndarray, rng: np.random.Generator) -> tuple[int, int, int
     top, bottom = max(0, int(top - grow[0] * height)), min(mask.shape[0], int(bottom + grow[1] * height))
     left, right = max(0, int(left - grow[2] * width)), min(mask.shape[1], int(right + grow[3] * width))
     return left, top, right - left, bottom - top
+
+
+def sensor_depth(depth: np.ndarray, rng: np.random.Generator, relative_sd: float) -> np.ndarray:
+    """A rendered depth (H, W) m as a depth camera reads it: Gaussian noise of ``relative_sd`` of each reading
+    (stereo noise grows with distance), then rounded to whole millimetres as a 16UC1 image stores it."""
+    noisy = depth * (1.0 + relative_sd * rng.standard_normal(depth.shape))
+    return (np.round(noisy * 1000.0) / 1000.0).astype(np.float32)
