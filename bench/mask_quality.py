@@ -147,7 +147,8 @@ def main() -> None:
     for name, row in table.items():
         print(f"| {name} | {row['views']} | {row['mean']:.3f} | {row['worst']:.3f} |")
     out = args.out or ROOT / "bench" / "results" / f"mask_quality_{args.seed}.json"
-    out.write_text(json.dumps({"seed": args.seed, "size": args.size, "depth_noise": args.depth_noise, "summary": table, "views": results,
+    out.write_text(json.dumps({"seed": args.seed, "size": args.size, "depth_noise": args.depth_noise,
+                               "summary": table, "views": results,
                                "seconds": time.monotonic() - started}, indent=2) + "\n")
     print(f"{time.monotonic() - started:.0f} s; {out}")
 
