@@ -3,8 +3,9 @@
 Back-project the depth with the intrinsics, find the support plane by RANSAC (the largest plane whose
 normal points up: along gravity when it is known, else towards the top of the image), keep what
 stands above it, split that into connected pieces at depth jumps (an object in front of another is a
-different piece), give a piece that does not reach the plane back to the piece it stands out in front
-of and touches (a duck's head in front of its body: a part, not an object), leave out what rises higher
+different piece) and at concave folds between two objects that each stand on the table (a box touching the
+target where no depth jump parts them), give a piece that does not reach the plane back to the piece it
+stands out in front of and touches (a duck's head in front of its body: a part, not an object), leave out what rises higher
 than a tabletop object can (a wall), take the target's piece (the one in the region of interest, else
 the one nearest the image centre), give it back its base (the bottom centimetre, under the height test's
 threshold: over its footprint, not facing up) and let GrabCut, seeded from it, settle the boundary the depth leaves
@@ -28,13 +29,16 @@ PLANE_TOLERANCE = 0.01  # m, or 1 % of the reading's depth when larger: a point 
 MIN_PLANE_SHARE = 0.1  # of the valid points: a smaller plane is no support
 UP_TOLERANCE_DEG = 30.0  # the plane normal vs gravity's up (when known)
 IMAGE_UP_MIN = 0.3  # without gravity: the normal's component towards the top of the image at least this
+STEEP_UP_MIN = 0.05  # ... or this, when no plane tilted as much holds enough points: a camera looking steeply down
+# sees the table nearly face on (a wall faces a camera that looks down with a normal towards the image bottom)
 MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
 MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
 CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
-SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece whose lowest points are this close
-# to the plane stands on it (a curved bottom starts a few cm up); one whose lowest points (5th percentile) are
-# higher is carried by another piece
+SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough points this close to the plane
+# (``stands``) stands on it (a curved bottom starts a few cm up); one without is carried by another piece
+FOOT_SHARE = 0.01  # of a piece's readings that must lie within SUPPORT_HEIGHT of the plane for it to stand on it
+FOOT_PIXELS = 10  # ... and at least this many: a thin leg in sight is enough, a speck of noise is not
 ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
 # 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
 CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most of its points along their shared
@@ -54,6 +58,13 @@ BASE_SLICE = 0.02  # m above the height threshold: the piece's points that draw 
 TABLE_TILT_DEG = 35.0  # a reading whose surface tilts less than this from the plane's normal faces up: the table
 # (under a rounded bottom, inside the footprint), not the object's side or underside
 NORMAL_STEP = 2  # px either side for the surface normal's finite differences
+CREASE_STEP = 4  # px either side of a reading: the two surface points a concave crease is judged between
+CREASE_NORMAL_STEP = 2  # px either side for their normals' finite differences
+CREASE_SMOOTHING = 0.01  # m: the points are smoothed over neighbours this close in 3-D before the normals are taken
+CREASE_ANGLE_DEG = 35.0  # the two normals differ by more than this at a crease
+OBJECT_COLOUR_DELTA = 15.0  # Delta E between the median colours of two parts that stay apart at a crease
+FOOT_BAND = 0.01  # m above the height test's threshold: each of two parts kept apart at a crease reaches this low
+# (a box's foot, a table's leg; not a marker low on a brick's side, which SUPPORT_HEIGHT would count as standing)
 
 
 class DepthSegmentationError(ValueError):
@@ -101,8 +112,9 @@ def _tolerance(depth: np.ndarray, base: float, share: float) -> np.ndarray:
 
 def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Generator) -> Plane:
     """The largest plane among ``points`` (M, 3) that can carry an object: its normal within
-    ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top.
-    DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
+    ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top by
+    ``IMAGE_UP_MIN`` (or only ``STEEP_UP_MIN`` when no such plane holds enough points: a camera looking
+    steeply down). DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
     if len(points) < 3:
         raise DepthSegmentationError("too few depth readings to find a support plane")
     scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]
@@ -115,17 +127,20 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     anchors = triples[usable, 0]
     normals *= np.where(np.sum(normals * anchors, axis=1) > 0, -1.0, 1.0)[:, None]  # towards the camera
     if up is not None:
-        usable = normals @ np.asarray(up, dtype=np.float64) >= math.cos(math.radians(UP_TOLERANCE_DEG))
+        tiers = [normals @ np.asarray(up, dtype=np.float64) >= math.cos(math.radians(UP_TOLERANCE_DEG))]
     else:
-        usable = -normals[:, 1] >= IMAGE_UP_MIN
-    normals, anchors = normals[usable], anchors[usable]
-    if len(normals) == 0:
+        tiers = [-normals[:, 1] >= IMAGE_UP_MIN, -normals[:, 1] >= STEEP_UP_MIN]
+    if not tiers[-1].any():
         raise DepthSegmentationError("no support plane facing up in the depth image")
     offsets = -np.sum(normals * anchors, axis=1)
     inliers = np.abs(scored @ normals.T + offsets) < tolerance  # (sample, hypotheses)
-    best = int(np.argmax(inliers.sum(axis=0)))
-    share = float(inliers[:, best].mean())
-    if share < MIN_PLANE_SHARE:
+    counts = inliers.sum(axis=0)
+    for usable in tiers:
+        best = int(np.argmax(np.where(usable, counts, -1)))
+        share = float(inliers[:, best].mean()) if usable.any() else 0.0
+        if share >= MIN_PLANE_SHARE:
+            break
+    else:
         raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * share:.0f} % "
                                      f"of the readings, {100 * MIN_PLANE_SHARE:.0f} % needed)")
     on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
@@ -183,11 +198,19 @@ def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: 
     return carriers
 
 
+def stands(height: np.ndarray, support: np.ndarray) -> bool:
+    """Whether a piece with these heights above the plane (N,) reaches it: at least ``FOOT_SHARE`` of its readings,
+    and ``FOOT_PIXELS``, lie within ``support`` (N,) of it (a toy table's top with a leg in sight stands; a duck's
+    head does not)."""
+    low = int(np.count_nonzero(height <= support))
+    return low >= max(FOOT_PIXELS, FOOT_SHARE * len(height))
+
+
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
                          valid: np.ndarray, support: np.ndarray, plane: Plane) -> np.ndarray:
     """The labels with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
-    table top and its legs), then every piece that still does not reach the plane (its 5th-percentile height
-    above its median ``support`` (H, W), m) joined to a neighbouring piece, larger or (standing on the plane) at
+    table top and its legs), then every piece that still does not reach the plane (``stands``: too few of its
+    points within ``support`` (H, W), m) joined to a neighbouring piece, larger or (standing on the plane) at
     least half as large, that it stands out in front of and is attached to (where they meet it is nearer the
     camera, its edge points lie within ``ATTACH_GAP`` of the neighbour's, and they share more than
     ``MIN_SHARED_EDGE`` of its outline; of several, the one with the longest shared edge): a part of an
@@ -201,7 +224,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     standing = np.zeros(count, bool)
     for piece in np.flatnonzero(areas):
         inside = labels == piece
-        standing[piece] = np.percentile(height[inside], 5) <= np.median(support[inside])
+        standing[piece] = stands(height[inside], support[inside])
     for piece in np.argsort(areas)[::-1]:  # what stands beneath a piece, smaller than it, joins it (its legs)
         if piece == 0 or areas[piece] == 0:
             continue
@@ -246,9 +269,10 @@ def _plane_basis(plane: Plane) -> np.ndarray:
     return np.stack([first, np.cross(plane.normal, first)])
 
 
-def faces_up(points: np.ndarray, valid: np.ndarray, plane: Plane) -> np.ndarray:
-    """(H, W) bool: the surface at each reading tilts less than ``TABLE_TILT_DEG`` from the plane's normal
-    (finite differences ``NORMAL_STEP`` px either side; False where a neighbour has no reading)."""
+def surface_normals(points: np.ndarray, same: np.ndarray, step: int = NORMAL_STEP) -> tuple[np.ndarray, np.ndarray]:
+    """Unit surface normals (H, W, 3), facing the camera, from finite differences ``step`` px either side, and
+    where they hold (H, W) bool: ``same`` (H, W) int labels readings that belong together (0: no reading), and a
+    normal holds where its four neighbours carry the pixel's own non-zero label (no depth jump, no hole between)."""
     step = NORMAL_STEP
     across = np.zeros_like(points)
     down = np.zeros_like(points)
@@ -256,11 +280,113 @@ def faces_up(points: np.ndarray, valid: np.ndarray, plane: Plane) -> np.ndarray:
     down[step:-step] = points[2 * step:] - points[:-2 * step]
     normal = np.cross(across, down)
     length = np.linalg.norm(normal, axis=-1)
-    reach = np.zeros_like(valid)
-    reach[step:-step, step:-step] = (valid[2 * step:, step:-step] & valid[:-2 * step, step:-step]
-                                     & valid[step:-step, 2 * step:] & valid[step:-step, :-2 * step])
-    cosine = np.abs(normal @ plane.normal) / np.maximum(length, 1e-12)
-    return reach & (length > 0) & (cosine > math.cos(math.radians(TABLE_TILT_DEG)))
+    centre = same[step:-step, step:-step]
+    holds = np.zeros(same.shape, bool)
+    holds[step:-step, step:-step] = ((centre > 0) & (same[2 * step:, step:-step] == centre)
+                                     & (same[:-2 * step, step:-step] == centre)
+                                     & (same[step:-step, 2 * step:] == centre)
+                                     & (same[step:-step, :-2 * step] == centre))
+    holds &= length > 0
+    normal = normal / np.maximum(length, 1e-12)[..., None]
+    normal *= np.where(np.sum(normal * points, axis=-1) > 0, -1.0, 1.0)[..., None]
+    return normal, holds
+
+
+def faces_up(points: np.ndarray, valid: np.ndarray, plane: Plane) -> np.ndarray:
+    """(H, W) bool: the surface at each reading tilts less than ``TABLE_TILT_DEG`` from the plane's normal
+    (``surface_normals``; False where a neighbour has no reading)."""
+    normal, holds = surface_normals(points, valid.astype(np.int32))
+    return holds & (np.abs(normal @ plane.normal) > math.cos(math.radians(TABLE_TILT_DEG)))
+
+
+def concave_creases(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(H, W) bool: readings on a concave fold of a piece's surface, where two faces meet in a valley seen from the
+    camera (a box's face rising from a table top that touches it), not a ridge (a box's own edge). Between the
+    readings ``CREASE_STEP`` px either side, in four directions: the normals differ by more than ``CREASE_ANGLE_DEG``
+    and ``(n1 - n2) . (p1 - p2) < 0`` (the local convexity test of LCCP, Stein et al. 2014). The normals span
+    ``CREASE_NORMAL_STEP`` px either side, on the points smoothed by a bilateral filter that averages only neighbours
+    within ``CREASE_SMOOTHING`` metres in 3-D: a camera's depth noise tilts raw normals by tens of degrees."""
+    smooth = cv2.bilateralFilter(points.astype(np.float32), 5, CREASE_SMOOTHING, 2).astype(np.float64)
+    normal, holds = surface_normals(smooth, labels, CREASE_NORMAL_STEP)
+    crease = np.zeros(labels.shape, bool)
+    k = CREASE_STEP
+    height, width = labels.shape
+    limit = math.cos(math.radians(CREASE_ANGLE_DEG))
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        rows = slice(k * dy, height - k * dy) if dy else slice(None)
+        centre_cols = slice(k, width - k) if dx else slice(None)
+        first = (slice(0, height - 2 * k * dy) if dy else slice(None),
+                 slice(0, width - 2 * k) if dx == 1 else slice(2 * k, None) if dx == -1 else slice(None))
+        second = (slice(2 * k * dy, None) if dy else slice(None),
+                  slice(2 * k, None) if dx == 1 else slice(0, width - 2 * k) if dx == -1 else slice(None))
+        both = (holds[first] & holds[second] & (labels[first] == labels[second])
+                & (labels[rows, centre_cols] == labels[first]))
+        n1, n2 = normal[first], normal[second]
+        folded = np.sum(n1 * n2, axis=-1) < limit
+        valley = np.sum((n1 - n2) * (smooth[first] - smooth[second]), axis=-1) < 0
+        crease[rows, centre_cols] |= both & folded & valley
+    return crease
+
+
+def _nearest_fill(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """``seeds`` (H, W) int (0: unlabelled) with every pixel of ``region`` (H, W) bool given the label of the nearest
+    seed."""
+    _, nearest = cv2.distanceTransformWithLabels((seeds == 0).astype(np.uint8), cv2.DIST_L2, 5,
+                                                 labelType=cv2.DIST_LABEL_PIXEL)
+    lookup = np.zeros(int(nearest.max()) + 1, seeds.dtype)
+    lookup[nearest[seeds > 0]] = seeds[seeds > 0]
+    return np.where(region, lookup[nearest], seeds)
+
+
+def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: np.ndarray, footing: np.ndarray,
+                   rgb: np.ndarray) -> tuple[int, np.ndarray]:
+    """(count, labels) with pieces cut apart where two objects touch without a depth jump. A piece is cut along its
+    concave creases (``concave_creases``) into parts (smaller ones, and the crease, go to the nearest large part);
+    two neighbouring parts stay apart only when each stands on the plane by itself (``stands``: its ``height`` (H, W)
+    under ``footing`` (H, W)) and their median colours differ by more than ``OBJECT_COLOUR_DELTA`` (Delta E):
+    two objects side by side. Otherwise they join again: a duck's head and body (one stands), a marker on a ball."""
+    crease = concave_creases(points, labels)
+    if not crease.any():
+        return count, labels
+    crease = cv2.dilate(crease.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)  # a cut with no gaps
+    lab = cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    labels = labels.copy()
+    reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (4 * CREASE_STEP + 1,) * 2)
+    for piece in np.unique(labels[crease & (labels > 0)]):
+        inside = labels == piece
+        parts_count, parts = cv2.connectedComponents((inside & ~crease).astype(np.uint8), connectivity=4)
+        areas = np.bincount(parts.ravel(), minlength=parts_count)
+        large = [part for part in range(1, parts_count) if areas[part] >= MIN_PIECE_SHARE * labels.size]
+        if len(large) < 2:
+            continue
+        parts = _nearest_fill(np.where(np.isin(parts, large), parts, 0), inside)
+        alone = {part: stands(height[parts == part], footing[parts == part]) for part in large}
+        colour = {part: np.median(lab[parts == part], axis=0) for part in large}
+        group = {part: part for part in large}
+        for part in large:
+            near = cv2.dilate((parts == part).astype(np.uint8), reach).astype(bool) & inside
+            for other in np.unique(parts[near]):
+                apart = (alone[part] and alone[other]
+                         and np.linalg.norm(colour[part] - colour[other]) > OBJECT_COLOUR_DELTA)
+                if other > part and not apart:
+                    _union(group, part, int(other))
+        roots = sorted({_root(group, part) for part in large}, key=lambda root: -areas[root])
+        for index, root in enumerate(roots[1:]):
+            labels[inside & np.isin(parts, [part for part in large if _root(group, part) == root])] = count + index
+        count += len(roots) - 1
+    return count, labels
+
+
+def _root(group: dict[int, int], part: int) -> int:
+    """The representative of ``part``'s group (union-find)."""
+    while group[part] != part:
+        part = group[part]
+    return part
+
+
+def _union(group: dict[int, int], first: int, second: int) -> None:
+    """Join the groups of ``first`` and ``second``."""
+    group[_root(group, second)] = _root(group, first)
 
 
 def over_footprint(object_points: np.ndarray, points: np.ndarray, plane: Plane, margin: float) -> np.ndarray:
@@ -392,13 +518,14 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(seed))
     height = plane.height(points)
     depth = np.where(valid, view.depth, 0.0)
-    above = valid & (height > _tolerance(depth, MIN_HEIGHT, 0.015))
-    count, labels = _pieces(above, depth, valid)
-    labels = merge_carried_pieces(labels, count, np.where(valid, height, 0.0), points, valid,
-                                  _tolerance(depth, SUPPORT_HEIGHT, 0.05), plane)
-    on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
-    labels = drop_scenery(labels, count, np.where(valid, height, 0.0))
     threshold = _tolerance(depth, MIN_HEIGHT, 0.015)
+    count, labels = _pieces(valid & (height > threshold), depth, valid)
+    known_height = np.where(valid, height, 0.0)
+    count, labels = split_touching(labels, count, points, known_height, threshold + FOOT_BAND, view.rgb)
+    labels = merge_carried_pieces(labels, count, known_height, points, valid, _tolerance(depth, SUPPORT_HEIGHT, 0.05),
+                                  plane)
+    on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
+    labels = drop_scenery(labels, count, known_height)
     piece = target_piece(labels, count, view.roi)
     piece = _fill_holes(recover_base(piece, points, valid, height, plane, threshold))
     mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
