@@ -3,14 +3,14 @@
 Back-project the depth with the intrinsics, find the support plane by RANSAC (the largest plane whose
 normal points up: along gravity when it is known, else towards the top of the image), keep what
 stands above it, split that into connected pieces at depth jumps (an object in front of another is a
-different piece) and at concave folds between two objects that each stand on the table (a box touching the
-target where no depth jump parts them), give a piece that does not reach the plane back to the piece it
-stands out in front of and touches (a duck's head in front of its body: a part, not an object), leave out what rises higher
-than a tabletop object can (a wall), take the target's piece (the one in the region of interest, else
-the one nearest the image centre), give it back its base (the bottom centimetre, under the height test's
-threshold: over its footprint, not facing up) and let GrabCut, seeded from it, settle the boundary the depth leaves
-ragged. Tolerances grow with each reading's depth, not the image's: a far wall does not loosen them.
-Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
+different piece) and at concave folds between two objects that each stand on the table (a box touching
+the target where no depth jump parts them), give a piece that does not reach the plane back to the piece
+it stands out in front of and touches (a duck's head in front of its body: a part, not an object), leave
+out what rises higher than a tabletop object can (a wall), take the target's piece (the one in the region
+of interest, else the one nearest the image centre), give it back its base (the bottom centimetre, under
+the height test's threshold: over its footprint, not facing up) and let GrabCut, seeded from it, settle
+the boundary the depth leaves ragged. Tolerances grow with each reading's depth, not the image's: a far
+wall does not loosen them. Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
 """
 from __future__ import annotations
 

@@ -7,13 +7,12 @@ shows a progress bar with the loss and the true-vs-wrong-pose loss gap, logs the
 inversion check (RotAcc on held-out views) to ``curve.csv`` and finally writes the EMA weights,
 ``solver_defaults.json`` and ``training.json`` into --out.
 
-``--minutes`` on clean renders, then optionally ``--robot-minutes`` on robot crops (the same cameras also
-rendered under random lamps with shadows, and the reference of each pair augmented by
-``idpose_core.demo_model.robot_crops``), its learning rate warmed up and decayed again. ``--init-from`` a
-model folder skips the clean phase and starts the robot phase from those weights.
+From the first step, ``--robot-share`` of the pairs are a robot's crops: the same cameras rendered again under
+random lamps with shadows, in a camera's tone, the reference of each pair augmented by
+``idpose_core.demo_model.robot_crops``; the rest are the clean renders. The loss gap and the inversion check are
+logged on held-out clean pairs and on held-out robot crops.
 
-    python scripts/train_demo_model.py --minutes 85       # the shipped model: 2 cores, nothing else running
-    python scripts/train_demo_model.py --init-from idpose_core/assets/demo_model --robot-minutes 25 --out robot_model
+    python scripts/train_demo_model.py        # the shipped model: 150 minutes on 2 cores, nothing else running
 """
 from __future__ import annotations
 
@@ -57,7 +56,7 @@ from idpose_core.synthetic.scenes import demo_objects
 GAP_TIMESTEPS = (400, 550, 700, 850)  # inside the default training range
 CHECK_AZIMUTHS = 12
 CHECK_POLARS_DEG = (-45.0, 0.0, 45.0)
-WARM_UP = 0.02  # of a phase's budget
+WARM_UP = 0.02  # of the wall-time budget
 
 
 def parse_args() -> argparse.Namespace:
@@ -65,14 +64,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=EMBEDDED_MODEL_DIR, help="where the final model goes")
     parser.add_argument("--work-dir", type=Path, default=Path.home() / ".cache" / "idpose_demo_model",
                         help="render cache, checkpoint and curve.csv (not in git)")
-    parser.add_argument("--minutes", type=float, default=85.0, help="wall-time budget of the clean phase")
-    parser.add_argument("--robot-minutes", type=float, default=0.0,
-                        help="wall-time budget of a robot-crop phase after the clean one (default 0: none)")
-    parser.add_argument("--robot-lr", type=float, default=1e-4, help="peak learning rate of the robot-crop phase")
-    parser.add_argument("--lamps", type=int, default=4, help="random lamps per object the training cameras are "
-                                                             "rendered under again")
-    parser.add_argument("--init-from", type=Path, default=None,
-                        help="a model folder: skip the clean phase and start the robot phase from its weights")
+    parser.add_argument("--minutes", type=float, default=150.0, help="wall-time budget of the training")
+    parser.add_argument("--robot-share", type=float, default=0.6, help="share of the pairs that are robot crops")
+    parser.add_argument("--lamps", type=int, default=8, help="random lamps per object the cameras are rendered under")
     parser.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (0: budget only)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
@@ -114,9 +108,11 @@ def load_data(args: argparse.Namespace) -> tuple[RenderedViews, RenderedViews]:
     return train, heldout
 
 
-def fixed_pairs(views: RenderedViews, count: int, seed: int, model: DemoDiffusionModel) -> PairBatch:
-    """A fixed set of held-out pairs (window scale 1.5, as at inference)."""
-    return make_pairs(views, *random_pairs(views, np.random.default_rng(seed), count), model.downsample)
+def fixed_pairs(views: RenderedViews, count: int, seed: int, model: DemoDiffusionModel,
+                crops: RobotCrops | None = None) -> PairBatch:
+    """A fixed set of held-out pairs (window scale 1.5, as at inference), as robot crops when ``crops`` are given."""
+    rng = np.random.default_rng(seed)
+    return make_pairs(views, *random_pairs(views, rng, count), model.downsample, crops=crops, rng=rng)
 
 
 @torch.no_grad()
@@ -139,12 +135,14 @@ def loss_gaps(predictor: DemoPredictor, pairs: PairBatch, seed: int) -> dict[int
     return gaps
 
 
-def probe_timestep(gaps: dict[int, float], args: argparse.Namespace) -> int:
-    """The timestep with the largest loss gap among those the model was trained at (the solver probes there)."""
-    trained = {t: gap for t, gap in gaps.items() if args.t_min <= t <= args.t_max}
+def probe_timestep(gaps: dict[str, dict[int, float]], args: argparse.Namespace) -> int:
+    """The timestep with the largest loss gap, summed over the held-out sets, among those the model was trained at
+    (the solver probes there)."""
+    trained = [t for t in GAP_TIMESTEPS if args.t_min <= t <= args.t_max]
     if not trained:
-        raise ValueError(f"no loss-gap timestep {sorted(gaps)} lies in the training range [{args.t_min}, {args.t_max}]")
-    return max(trained, key=trained.get)
+        raise ValueError(f"no loss-gap timestep {GAP_TIMESTEPS} lies in the training range "
+                         f"[{args.t_min}, {args.t_max}]")
+    return max(trained, key=lambda t: sum(by_t[t] for by_t in gaps.values()))
 
 
 def inversion_check(predictor: DemoPredictor, pairs: PairBatch, views: RenderedViews, t: int) -> dict[str, float]:
@@ -188,16 +186,41 @@ def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: to
 
 
 def learning_rate_factor(progress: float) -> float:
-    """Linear warm-up over the first WARM_UP of a phase's wall-time budget, then a cosine decay to a tenth."""
+    """Linear warm-up over the first WARM_UP of the wall-time budget, then a cosine decay to a tenth."""
     cosine = 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
     return min(1.0, max(progress, 1e-3) / WARM_UP) * (0.1 + 0.9 * cosine)
 
 
-def phase_at(elapsed: float, clean_budget: float, robot_budget: float) -> tuple[str, float, float]:
-    """(phase, seconds into it, its budget) at ``elapsed`` seconds of training."""
-    if elapsed < clean_budget:
-        return "clean", elapsed, clean_budget
-    return "robot", elapsed - clean_budget, robot_budget
+class HeldOut:
+    """The held-out pairs the curve follows, per set (clean renders, robot crops): fixed pairs for the loss gap and
+    for the inversion check."""
+
+    def __init__(self, args: argparse.Namespace, views: RenderedViews, crops: RobotCrops, model: DemoDiffusionModel):
+        self.views = views
+        self.gap = {"clean": fixed_pairs(views, args.gap_pairs, args.seed + 1, model),
+                    "robot": fixed_pairs(views, args.gap_pairs, args.seed + 4, model, crops)}
+        self.check = {"clean": fixed_pairs(views, args.check_pairs, args.seed + 2, model),
+                      "robot": fixed_pairs(views, args.check_pairs, args.seed + 5, model, crops)}
+        self.seed = args.seed + 3
+
+    def gaps(self, predictor: DemoPredictor) -> dict[str, dict[int, float]]:
+        return {name: loss_gaps(predictor, pairs, self.seed) for name, pairs in self.gap.items()}
+
+    def checks(self, predictor: DemoPredictor, t: int) -> dict[str, dict[str, float]]:
+        return {name: inversion_check(predictor, pairs, self.views, t) for name, pairs in self.check.items()}
+
+
+CURVE_SETS = ("clean", "robot")
+
+
+def curve_header() -> list[str]:
+    """Columns of curve.csv: the loss, the gap per held-out set and timestep, the inversion checks per set."""
+    return (["step", "minutes", "loss"] + [f"{name}_gap_t{t}" for name in CURVE_SETS for t in GAP_TIMESTEPS]
+            + ["check_t"] + [f"{name}_acc{a}" for name in CURVE_SETS for a in (15, 30)])
+
+
+def describe(checks: dict[str, dict[str, float]]) -> str:
+    return ", ".join(f"{name} RotAcc@15 {c['acc15']:.0%} @30 {c['acc30']:.0%}" for name, c in checks.items())
 
 
 def main() -> None:
@@ -210,9 +233,6 @@ def main() -> None:
                              token_in_timestep_embedding=args.token_in_timestep,
                              prediction_type=args.prediction_type)
     model = DemoDiffusionModel(config)
-    if args.init_from is not None:
-        model = DemoDiffusionModel.from_pretrained(args.init_from)
-        config = model.config
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     ema = EMAModel(model.parameters(), decay=args.ema_decay)
     checkpoint_path = args.work_dir / "checkpoint.pt"
@@ -229,9 +249,13 @@ def main() -> None:
     history.append({"from_step": step, "arguments": {k: str(v) if isinstance(v, Path) else v
                                                      for k, v in vars(args).items()}})
     train, heldout = load_data(args)
-    gap_pairs = fixed_pairs(heldout, args.gap_pairs, args.seed + 1, model)
-    check_pairs = fixed_pairs(heldout, args.check_pairs, args.seed + 2, model)
-    baseline, _ = random_pose_errors(*map(spherical_to_c2w, true_cameras(check_pairs, heldout)), 200,
+    specs = demo_objects()
+    lamps = f"{args.seed}_{args.lamps}.npz"
+    crops = RobotCrops(cached_lit(args.work_dir / f"lamps_{lamps}", specs, train, args.seed + 2000, args.lamps))
+    heldout_crops = RobotCrops(cached_lit(args.work_dir / f"heldout_lamps_{lamps}", specs, heldout, args.seed + 3000,
+                                          args.lamps))
+    held_out = HeldOut(args, heldout, heldout_crops, model)
+    baseline, _ = random_pose_errors(*map(spherical_to_c2w, true_cameras(held_out.check["clean"], heldout)), 200,
                                      np.random.default_rng(args.seed))
     print(f"random-pose baseline on the check pairs: RotAcc@15 {np.mean(baseline < 15):.0%}, "
           f"@30 {np.mean(baseline < 30):.0%}")
@@ -240,33 +264,22 @@ def main() -> None:
     curve = curve_path.open("a", newline="")
     writer = csv.writer(curve)
     if new_curve:
-        writer.writerow(["step", "minutes", "loss"] + [f"gap_t{t}" for t in GAP_TIMESTEPS]
-                        + ["check_t", "acc15", "acc30"])
+        writer.writerow(curve_header())
 
-    clean_budget = 0.0 if args.init_from is not None else args.minutes * 60.0
-    robot_budget = args.robot_minutes * 60.0
-    budget = clean_budget + robot_budget
-    crops = RobotCrops(cached_lit(args.work_dir / f"lamps_{args.seed}_{args.lamps}.npz", demo_objects(), train,
-                                  args.seed + 2000, args.lamps)) if robot_budget > 0 else None
+    budget = args.minutes * 60.0
     started = time.monotonic() - elapsed
     last_checkpoint = last_check = time.monotonic()
-    gaps: dict[int, float] = {}
+    gaps: dict[str, dict[int, float]] = {}
     losses: list[float] = []
     jitter = (1.5 - args.window_jitter, 1.5 + args.window_jitter)
-    phase, pool = "", None
+    pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter, crops, args.robot_share)
+    pool.fill(np.random.default_rng([args.seed, step, 1]), min(512, args.pool))
     bar = tqdm(total=int(budget), initial=int(elapsed), unit="s", desc="train demo model")
     model.train()
     while True:
         elapsed = time.monotonic() - started
         if elapsed >= budget or (args.max_steps and step >= args.max_steps):
             break
-        now_phase, into, phase_budget = phase_at(elapsed, clean_budget, robot_budget)
-        if now_phase != phase:
-            phase = now_phase
-            pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter,
-                            crops if phase == "robot" else None)
-            pool.fill(np.random.default_rng([args.seed, step, 1]), min(512, args.pool))
-            bar.set_description(f"train demo model ({phase} phase)")
         rng = np.random.default_rng([args.seed, step])
         reference, target, pose, reference_view = pool.draw(rng, args.batch)
         t = torch.as_tensor(rng.integers(args.t_min, args.t_max + 1, size=args.batch))
@@ -274,33 +287,32 @@ def main() -> None:
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-        peak = args.lr if phase == "clean" else args.robot_lr
         for group in optimizer.param_groups:
-            group["lr"] = peak * learning_rate_factor(into / phase_budget)
+            group["lr"] = args.lr * learning_rate_factor(elapsed / budget)
         optimizer.step()
         ema.step(model.parameters())
         step += 1
         losses.append(denoising.item())
 
-        row_check = ["", "", ""]
+        row_check = [""] * (1 + 2 * len(CURVE_SETS))
         now = time.monotonic()
         if step % args.gap_every == 0 or now - last_check >= args.check_every_minutes * 60.0:
             predictor = ema_predictor(model, ema, config)
-            gaps = loss_gaps(predictor, gap_pairs, args.seed + 3)
+            gaps = held_out.gaps(predictor)
             if now - last_check >= args.check_every_minutes * 60.0:
                 best_t = probe_timestep(gaps, args)
-                result = inversion_check(predictor, check_pairs, heldout, best_t)
-                row_check = [best_t, result["acc15"], result["acc30"]]
-                tqdm.write(f"step {step}: inversion check at t={best_t}: RotAcc@15 {result['acc15']:.0%}, "
-                           f"@30 {result['acc30']:.0%}")
+                checks = held_out.checks(predictor, best_t)
+                row_check = [best_t] + [checks[name][f"acc{a}"] for name in CURVE_SETS for a in (15, 30)]
+                tqdm.write(f"step {step}: inversion check at t={best_t}: {describe(checks)}")
                 last_check = time.monotonic()
             writer.writerow([step, round((time.monotonic() - started) / 60, 2), round(float(np.mean(losses)), 5)]
-                            + [round(gaps[t], 4) for t in GAP_TIMESTEPS] + row_check)
+                            + [round(gaps[name][t], 4) for name in CURVE_SETS for t in GAP_TIMESTEPS] + row_check)
             curve.flush()
             losses = []
             model.train()
-        best = max(gaps.items(), key=lambda item: item[1]) if gaps else (0, 0.0)
-        bar.set_postfix(step=step, loss=f"{losses[-1] if losses else 0:.4f}", gap=f"{best[1]:+.1%}@t{best[0]}")
+        best = {name: max(by_t.values()) for name, by_t in gaps.items()}
+        bar.set_postfix(step=step, loss=f"{losses[-1] if losses else 0:.4f}",
+                        gap="/".join(f"{best.get(name, 0.0):+.0%}" for name in CURVE_SETS))
         bar.update(int(time.monotonic() - started) - bar.n)
         if time.monotonic() - last_checkpoint >= args.checkpoint_every_minutes * 60.0:
             save_checkpoint(checkpoint_path, model, optimizer, ema, step, time.monotonic() - started, history)
@@ -309,10 +321,10 @@ def main() -> None:
     elapsed = time.monotonic() - started
     save_checkpoint(checkpoint_path, model, optimizer, ema, step, elapsed, history)
     predictor = ema_predictor(model, ema, config)
-    gaps = loss_gaps(predictor, gap_pairs, args.seed + 3)
+    gaps = held_out.gaps(predictor)
     best_t = probe_timestep(gaps, args)
-    final = inversion_check(predictor, check_pairs, heldout, best_t)
-    print(f"final: step {step}, {elapsed / 60:.1f} min, gaps {gaps}, check at t={best_t}: {final}")
+    final = held_out.checks(predictor, best_t)
+    print(f"final: step {step}, {elapsed / 60:.1f} min, gaps {gaps}, check at t={best_t}: {describe(final)}")
     predictor.model.save_pretrained(args.out)
     (args.out / "solver_defaults.json").write_text(json.dumps(
         {"probe_t": best_t / config.num_train_timesteps,
@@ -323,18 +335,15 @@ def main() -> None:
         "seed": args.seed,
         "phases": history,
         "config": asdict(config),
-        "initial_weights": None if args.init_from is None else {
-            "folder": str(args.init_from), "training": json.loads((args.init_from / "training.json").read_text())
-            if (args.init_from / "training.json").is_file() else None},
-        "robot_crops": None if crops is None else {"lamps_per_object": args.lamps, "other_lamp": crops.other_lamp,
-                                                   "reference": asdict(crops.reference),
-                                                   "target": asdict(crops.target)},
+        "robot_crops": {"share": args.robot_share, "lamps_per_object": args.lamps, "other_lamp": crops.other_lamp,
+                        "reference": asdict(crops.reference), "target": asdict(crops.target)},
         "data": {"objects": list(train.names), "train_views_per_object": train.views_per_object,
                  "heldout_views_per_object": heldout.views_per_object, "image_size": args.image_size,
                  "polar_deg": [30, 150], "fov_deg": 60},
         "steps": step, "batch": args.batch, "wall_minutes": round(elapsed / 60, 1),
         "threads": args.threads, "loss_gap_by_t": gaps, "final_check": {"t": best_t, **final,
-        "pairs": len(check_pairs.pose), "grid": f"{CHECK_AZIMUTHS} azimuths x polar offsets {CHECK_POLARS_DEG}"},
+        "pairs": len(held_out.check["clean"].pose),
+        "grid": f"{CHECK_AZIMUTHS} azimuths x polar offsets {CHECK_POLARS_DEG}"},
     }, indent=2) + "\n")
     curve.close()
     plot_curve(curve_path, args.work_dir / "curve.png")
@@ -342,22 +351,27 @@ def main() -> None:
 
 
 def plot_curve(curve_path: Path, png_path: Path) -> None:
-    """``curve.csv`` as a PNG: the loss gap at each probe timestep and the inversion checks vs minutes."""
+    """``curve.csv`` as a PNG: the loss gap at each probe timestep and the inversion checks vs minutes, per held-out
+    set (solid: clean renders, dashed: robot crops)."""
     with curve_path.open() as handle:
         rows = list(csv.DictReader(handle))
     minutes = [float(row["minutes"]) for row in rows]
     figure, (gap_axes, check_axes) = plt.subplots(1, 2, figsize=(11, 4))
-    for column in [name for name in rows[0] if name.startswith("gap_t")]:
-        gap_axes.plot(minutes, [100 * float(row[column]) for row in rows], label=f"t = {column[5:]}")
+    for name, style in zip(CURVE_SETS, ("-", "--")):
+        for index, t in enumerate(GAP_TIMESTEPS):
+            gap_axes.plot(minutes, [100 * float(row[f"{name}_gap_t{t}"]) for row in rows], style, color=f"C{index}",
+                          label=f"{name}, t = {t}")
     gap_axes.set(xlabel="training minutes", ylabel="loss gap, wrong vs true pose (%)", title="held-out pairs")
-    gap_axes.legend()
-    checks = [row for row in rows if row["acc30"]]
-    for key, label in (("acc15", "RotAcc@15"), ("acc30", "RotAcc@30")):
-        check_axes.plot([float(row["minutes"]) for row in checks], [100 * float(row[key]) for row in checks], "o-",
-                        label=label)
+    gap_axes.legend(fontsize="small")
+    checks = [row for row in rows if row["check_t"]]
+    for name, style in zip(CURVE_SETS, ("o-", "s--")):
+        for index, accuracy in enumerate((15, 30)):
+            check_axes.plot([float(row["minutes"]) for row in checks],
+                            [100 * float(row[f"{name}_acc{accuracy}"]) for row in checks], style, color=f"C{index}",
+                            label=f"{name}, RotAcc@{accuracy}")
     check_axes.set(xlabel="training minutes", ylabel="%", ylim=(0, 100),
                    title="grid-search inversion check (held-out pairs)")
-    check_axes.legend()
+    check_axes.legend(fontsize="small")
     figure.tight_layout()
     figure.savefig(png_path, dpi=100)
     plt.close(figure)
@@ -365,7 +379,7 @@ def plot_curve(curve_path: Path, png_path: Path) -> None:
 
 def save_checkpoint(path: Path, model: DemoDiffusionModel, optimizer: torch.optim.Optimizer, ema: EMAModel,
                     step: int, elapsed: float, history: list[dict]) -> None:
-    """Atomically write everything needed to resume (``history``: the arguments of every resumed phase)."""
+    """Atomically write everything needed to resume (``history``: the arguments of every start and resume)."""
     temporary = path.with_suffix(".tmp")
     torch.save({"model": model.state_dict(), "optimizer": optimizer.state_dict(), "ema": ema.state_dict(),
                 "step": step, "elapsed": elapsed, "history": json.dumps(history)}, temporary)

@@ -165,15 +165,17 @@ class PairBatch:
 def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: np.ndarray,
                target_index: np.ndarray, downsample: Callable[[torch.Tensor], torch.Tensor],
                window_scales: np.ndarray | float = 1.5, crops: RobotCrops | None = None,
-               rng: np.random.Generator | None = None) -> PairBatch:
+               rng: np.random.Generator | None = None, robot: np.ndarray | None = None) -> PairBatch:
     """Preprocess each pair as a two-view set (``preprocess_views``) and downsample to model size; with
-    ``crops``, each view is first made a robot's crop (drawn from ``rng``)."""
+    ``crops``, the pairs that ``robot`` (bool per pair, default all) marks are first made a robot's crops
+    (drawn from ``rng``)."""
     scales = np.broadcast_to(np.asarray(window_scales, dtype=np.float64), object_index.shape)
+    robot = np.broadcast_to(np.ones(1, bool) if robot is None else np.asarray(robot, bool), object_index.shape)
     if crops is not None and rng is None:
         raise ValueError("robot crops need a random generator")
     images = []
-    for o, a, b, scale in zip(object_index, reference_index, target_index, scales):
-        if crops is None:
+    for o, a, b, scale, as_robot in zip(object_index, reference_index, target_index, scales, robot):
+        if crops is None or not as_robot:
             pair = [ViewInput(views.rgb[o, k], views.mask[o, k].astype(np.uint8) * 255) for k in (a, b)]
         else:
             pair = [ViewInput(rgb, mask.astype(np.uint8) * 255) for rgb, mask in crops.pair(views, o, a, b, rng)]
@@ -195,7 +197,8 @@ def random_pairs(views: RenderedViews, rng: np.random.Generator, count: int) -> 
 
 
 class PairPool:
-    """A rolling pool of preprocessed training pairs: each draw adds ``refresh`` fresh pairs.
+    """A rolling pool of preprocessed training pairs: each draw adds ``refresh`` fresh pairs, each of them a
+    robot's crops (``crops``) with odds ``robot_share``, else the clean renders.
 
     Preprocessing a pair costs about as much as a tenth of a training step here, so pairs are
     reused a few times instead of being prepared anew for every batch.
@@ -204,14 +207,17 @@ class PairPool:
     FIELDS = ("reference", "target", "pose", "reference_view")
 
     def __init__(self, views: RenderedViews, downsample: Callable[[torch.Tensor], torch.Tensor],
-                 capacity: int, refresh: int, window_scale_range: tuple[float, float], crops: RobotCrops | None = None):
-        self.views, self.downsample, self.crops = views, downsample, crops
+                 capacity: int, refresh: int, window_scale_range: tuple[float, float], crops: RobotCrops | None = None,
+                 robot_share: float = 1.0):
+        self.views, self.downsample, self.crops, self.robot_share = views, downsample, crops, robot_share
         self.capacity, self.refresh, self.window_scale_range = capacity, refresh, window_scale_range
         self.tensors: dict[str, torch.Tensor] = {}
 
     def _fresh(self, rng: np.random.Generator, count: int) -> dict[str, torch.Tensor]:
         scales = rng.uniform(*self.window_scale_range, size=count)
-        batch = make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales, self.crops, rng)
+        robot = rng.random(count) < self.robot_share
+        batch = make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales, self.crops, rng,
+                           robot)
         return {name: getattr(batch, name) for name in self.FIELDS}
 
     def fill(self, rng: np.random.Generator, count: int) -> None:
