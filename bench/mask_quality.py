@@ -20,7 +20,8 @@ what makes segmentation hard:
 
 Targets are the six demo objects in turn (parts: a generated head-and-body). The mask is what the
 pipeline computes from the colour image, the depth and the intrinsics (``foreground_mask``: the depth
-cut, with its fallbacks), without gravity; views where under 300 target pixels are visible are left out.
+cut, with its fallbacks), without gravity; views where under 300 target pixels, or under half of its silhouette,
+are in sight (a target hidden behind another object) are left out.
 `--depth-noise` gives the depth as a camera reads it (relative Gaussian noise, rounded to millimetres).
 Prints mean and worst IoU per row and overall (the five failure types) with the number of views, and
 writes bench/results/mask_quality_<seed>.json.
@@ -60,13 +61,15 @@ from idpose_core.view_input import ViewInput  # noqa: E402
 FOV_DEG = 60.0
 POLAR_DEG, DISTANCE = (30.0, 82.0), (0.4, 0.75)
 MIN_VISIBLE = 300  # px of the target that must be in sight
+MIN_VISIBLE_SHARE = 0.5  # of the target's silhouette: a target mostly hidden behind another object is not in view
 EXTRA_ROWS = ("off_centre_roi", "crowded", "crowded_roi")  # off-centre views beside the failure types
 
 
 def challenge_view(challenge: str, index: int, seed: int, size: int, crowded: bool = False,
                    depth_noise: float = 0.0) -> tuple[ViewInput, np.ndarray] | None:
     """(the view: colour, depth, intrinsics; the target's true mask) of scene ``index`` of a failure type, or
-    None when too little of the target is in sight. ``crowded`` (off-centre only): another object nearer the
+    None when too little of the target is in sight (under ``MIN_VISIBLE`` px, or under ``MIN_VISIBLE_SHARE`` of
+    its silhouette: mostly hidden behind another object). ``crowded`` (off-centre only): another object nearer the
     image centre than the target. ``depth_noise``: the depth as a camera reads it (``sensor_depth``)."""
     rng = np.random.default_rng([seed, CHALLENGES.index(challenge), index] + [1] * crowded)
     target = parts_target(rng) if challenge == "parts" else demo_objects()[index % len(demo_objects())]
@@ -79,7 +82,9 @@ def challenge_view(challenge: str, index: int, seed: int, size: int, crowded: bo
                   else challenge_camera(sphere))
     with TabletopRenderer(layout, image_size=size, fov_deg=FOV_DEG) as renderer:
         frame = renderer.render(camera)
-    if frame.target_mask.sum() < MIN_VISIBLE:
+    with TabletopRenderer(dataclasses.replace(layout, distractors=()), image_size=size, fov_deg=FOV_DEG) as alone:
+        silhouette = alone.render(camera).target_mask.sum()
+    if frame.target_mask.sum() < max(MIN_VISIBLE, MIN_VISIBLE_SHARE * silhouette):
         return None
     depth = sensor_depth(frame.depth, rng, depth_noise) if depth_noise else frame.depth
     return ViewInput(frame.rgb, depth=depth, intrinsics=pinhole_intrinsics(size, FOV_DEG)), frame.target_mask

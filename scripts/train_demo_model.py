@@ -7,10 +7,11 @@ shows a progress bar with the loss and the true-vs-wrong-pose loss gap, logs the
 inversion check (RotAcc on held-out views) to ``curve.csv`` and finally writes the EMA weights,
 ``solver_defaults.json`` and ``training.json`` into --out.
 
-From the first step, ``--robot-share`` of the pairs are a robot's crops: the same cameras rendered again under
-random lamps with shadows, in a camera's tone, the reference of each pair augmented by
-``idpose_core.demo_model.robot_crops``; the rest are the clean renders. The loss gap and the inversion check are
-logged on held-out clean pairs and on held-out robot crops.
+A growing share of the pairs are a robot's crops: the same cameras rendered again under random lamps with
+shadows, in a camera's tone, the reference of each pair augmented by ``idpose_core.demo_model.robot_crops``; the
+rest are the clean renders. The share is 0 while the model first learns to read the pose (``--robot-from`` of the
+budget), then grows linearly to ``--robot-share`` over ``--robot-ramp`` of the budget. The loss gap and the
+inversion check are logged on held-out clean pairs and on held-out robot crops.
 
     python scripts/train_demo_model.py        # the shipped model: 150 minutes on 2 cores, nothing else running
 """
@@ -66,6 +67,10 @@ def parse_args() -> argparse.Namespace:
                         help="render cache, checkpoint and curve.csv (not in git)")
     parser.add_argument("--minutes", type=float, default=150.0, help="wall-time budget of the training")
     parser.add_argument("--robot-share", type=float, default=0.6, help="share of the pairs that are robot crops")
+    parser.add_argument("--robot-from", type=float, default=0.15,
+                        help="share of the budget trained on clean renders only, before robot crops come in")
+    parser.add_argument("--robot-ramp", type=float, default=0.25,
+                        help="share of the budget over which the robot crops' share grows to --robot-share")
     parser.add_argument("--lamps", type=int, default=8, help="random lamps per object the cameras are rendered under")
     parser.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (0: budget only)")
     parser.add_argument("--seed", type=int, default=0)
@@ -185,6 +190,12 @@ def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: to
     return denoising + view_weight * (model.view_head_output(embedding) - wanted_view).pow(2).mean(), denoising
 
 
+def robot_share_at(progress: float, args: argparse.Namespace) -> float:
+    """The share of robot crops among the fresh pairs at ``progress`` (0..1) of the budget."""
+    ramp = (progress - args.robot_from) / args.robot_ramp if args.robot_ramp > 0 else float(progress >= args.robot_from)
+    return args.robot_share * min(1.0, max(0.0, ramp))
+
+
 def learning_rate_factor(progress: float) -> float:
     """Linear warm-up over the first WARM_UP of the wall-time budget, then a cosine decay to a tenth."""
     cosine = 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
@@ -272,7 +283,8 @@ def main() -> None:
     gaps: dict[str, dict[int, float]] = {}
     losses: list[float] = []
     jitter = (1.5 - args.window_jitter, 1.5 + args.window_jitter)
-    pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter, crops, args.robot_share)
+    pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter, crops,
+                    robot_share_at(elapsed / budget, args))
     pool.fill(np.random.default_rng([args.seed, step, 1]), min(512, args.pool))
     bar = tqdm(total=int(budget), initial=int(elapsed), unit="s", desc="train demo model")
     model.train()
@@ -281,6 +293,7 @@ def main() -> None:
         if elapsed >= budget or (args.max_steps and step >= args.max_steps):
             break
         rng = np.random.default_rng([args.seed, step])
+        pool.robot_share = robot_share_at(elapsed / budget, args)
         reference, target, pose, reference_view = pool.draw(rng, args.batch)
         t = torch.as_tensor(rng.integers(args.t_min, args.t_max + 1, size=args.batch))
         loss, denoising = training_loss(model, reference, target, pose, reference_view, t, args.view_weight)
@@ -311,7 +324,7 @@ def main() -> None:
             losses = []
             model.train()
         best = {name: max(by_t.values()) for name, by_t in gaps.items()}
-        bar.set_postfix(step=step, loss=f"{losses[-1] if losses else 0:.4f}",
+        bar.set_postfix(step=step, loss=f"{losses[-1] if losses else 0:.4f}", robot=f"{pool.robot_share:.0%}",
                         gap="/".join(f"{best.get(name, 0.0):+.0%}" for name in CURVE_SETS))
         bar.update(int(time.monotonic() - started) - bar.n)
         if time.monotonic() - last_checkpoint >= args.checkpoint_every_minutes * 60.0:
@@ -335,7 +348,8 @@ def main() -> None:
         "seed": args.seed,
         "phases": history,
         "config": asdict(config),
-        "robot_crops": {"share": args.robot_share, "lamps_per_object": args.lamps, "other_lamp": crops.other_lamp,
+        "robot_crops": {"share": args.robot_share, "from": args.robot_from, "ramp": args.robot_ramp,
+                        "lamps_per_object": args.lamps, "other_lamp": crops.other_lamp,
                         "reference": asdict(crops.reference), "target": asdict(crops.target)},
         "data": {"objects": list(train.names), "train_views_per_object": train.views_per_object,
                  "heldout_views_per_object": heldout.views_per_object, "image_size": args.image_size,

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from idpose_core.demo_model import DemoPredictor
 
@@ -34,26 +35,39 @@ def test_training_resumes_and_writes_a_loadable_model_with_its_records(tmp_path)
     assert [phase["from_step"] for phase in training["phases"]] == [0, 2]
     assert training["data"]["objects"] == ["duck", "teddy", "mug", "soccerball", "lego", "desk"]
     rows = (work / "curve.csv").read_text().splitlines()
-    assert rows[0].startswith("step,minutes,loss,gap_t") and len(rows) == 3  # header + steps 2 and 4
+    assert rows[0].startswith("step,minutes,loss,clean_gap_t") and len(rows) == 3  # header + steps 2 and 4
     predictor = DemoPredictor.from_pretrained(out)
     assert predictor.model.config.block_out_channels == (8, 16)
     assert 0.0 < predictor.solver_defaults["probe_t"] < 1.0
 
 
-def test_the_robot_phase_starts_from_given_weights_on_lit_augmented_crops(tmp_path):
-    clean = tmp_path / "clean"
-    assert train(tmp_path / "work_clean", clean, 2).returncode == 0
-    out = tmp_path / "robot"
-    robot = train(tmp_path / "work_robot", out, 3, "--init-from", str(clean), "--lamps", "1",
-                  "--robot-minutes", "30")
-    assert robot.returncode == 0, robot.stderr[-2000:]
-    assert "robot phase" in robot.stderr
-    lit = np.load(tmp_path / "work_robot" / "lamps_0_1.npz")["rgb"]
-    plain = np.load(tmp_path / "work_robot" / "train_0.npz")["rgb"]
+def test_robot_crops_come_in_after_the_clean_start_and_are_recorded(tmp_path):
+    """With no clean start the first steps already draw robot crops: lamps rendered per object, the share and the
+    augmentation recorded; the held-out curve follows clean pairs and robot crops."""
+    out = tmp_path / "model"
+    run = train(tmp_path / "work", out, 3, "--lamps", "1", "--robot-from", "0", "--robot-ramp", "0",
+                "--robot-share", "1")
+    assert run.returncode == 0, run.stderr[-2000:]
+    lit = np.load(tmp_path / "work" / "lamps_0_1.npz")["rgb"]
+    plain = np.load(tmp_path / "work" / "train_0.npz")["rgb"]
     assert lit.shape == (6, 3, 1, 32, 32, 3) and not np.array_equal(lit[:, :, 0], plain)  # other lights
+    assert "robot=100%" in run.stderr
     training = json.loads((out / "training.json").read_text())
-    assert training["initial_weights"]["training"]["steps"] == 2
     crops = training["robot_crops"]
-    assert crops["lamps_per_object"] == 1 and crops["reference"]["occluder"] > 0 == crops["target"]["occluder"]
-    assert training["steps"] == 3
-    assert DemoPredictor.from_pretrained(out).model.config.block_out_channels == (8, 16)
+    assert crops["share"] == 1 and crops["from"] == 0 and crops["lamps_per_object"] == 1
+    assert crops["reference"]["occluder"] > 0 == crops["target"]["occluder"]
+    header = (tmp_path / "work" / "curve.csv").read_text().splitlines()[0].split(",")
+    assert "clean_gap_t400" in header and "robot_gap_t400" in header and "robot_acc30" in header
+
+
+def test_the_robot_share_grows_after_the_clean_start():
+    """0 during the clean start, then linear up to the chosen share, then held."""
+    import argparse
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("train_demo_model", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    args = argparse.Namespace(robot_share=0.6, robot_from=0.2, robot_ramp=0.4)
+    shares = [module.robot_share_at(progress, args) for progress in (0.0, 0.2, 0.4, 0.6, 0.9)]
+    assert shares == pytest.approx([0.0, 0.0, 0.3, 0.6, 0.6])

@@ -23,17 +23,17 @@ class CropAugmentation:
     """How often each effect is applied to a view (``clean``: the share left exactly as rendered) and its range."""
 
     clean: float = 0.4
-    scale: float = 0.5
-    scale_range: tuple[float, float] = (0.75, 1.3)  # zoom about the object: a camera nearer or farther
+    scale: float = 0.3
+    scale_range: tuple[float, float] = (0.85, 1.2)  # zoom about the object: a camera nearer or farther
     colour: float = 0.8
     shadow: float = 0.35
     shadow_strength: tuple[float, float] = (0.45, 0.8)  # brightness left in the shadow
     blur: float = 0.5
     resolution: tuple[float, float] = (0.3, 1.0)  # of the render's size, before scaling back up
-    occluder: float = 0.3
-    rim: float = 0.35
+    occluder: float = 0.15
+    rim: float = 0.25
     rim_px: tuple[int, int] = (1, 4)
-    border: float = 0.2
+    border: float = 0.1
     border_cut: tuple[float, float] = (0.1, 0.35)  # of the object's extent lost past the border
     noise: float = 0.3
     noise_sd: tuple[float, float] = (2.0, 6.0)  # grey levels

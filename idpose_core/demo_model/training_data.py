@@ -124,7 +124,7 @@ class RobotCrops:
     lit: np.ndarray
     reference: CropAugmentation = CropAugmentation()
     target: CropAugmentation = TARGET_AUGMENTATION
-    other_lamp: float = 0.2
+    other_lamp: float = 0.1
 
     def pair(self, views: RenderedViews, o: int, a: int, b: int, rng: np.random.Generator
              ) -> list[tuple[np.ndarray, np.ndarray]]:
