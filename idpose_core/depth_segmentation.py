@@ -62,7 +62,10 @@ CREASE_STEP = 4  # px either side of a reading: the two surface points a concave
 CREASE_NORMAL_STEP = 2  # px either side for their normals' finite differences
 CREASE_SMOOTHING = 0.01  # m: the points are smoothed over neighbours this close in 3-D before the normals are taken
 CREASE_ANGLE_DEG = 35.0  # the two normals differ by more than this at a crease
-OBJECT_COLOUR_DELTA = 15.0  # Delta E between the median colours of two parts that stay apart at a crease
+NECK_RADIUS = 3  # px: a piece narrower than a disc this wide is cut there too (then joined again unless the
+# two sides are two objects, as at a concave fold)
+OBJECT_CHROMA_DELTA = 0.04  # between the median chromaticities (r, g, b) / (r + g + b) of two parts that stay apart
+# at a cut: two objects differ in colour, two faces of one object under a lamp only in brightness
 FOOT_BAND = 0.01  # m above the height test's threshold: each of two parts kept apart at a crease reaches this low
 # (a box's foot, a table's leg; not a marker low on a brick's side, which SUPPORT_HEIGHT would count as standing)
 
@@ -207,7 +210,8 @@ def stands(height: np.ndarray, support: np.ndarray) -> bool:
 
 
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
-                         valid: np.ndarray, support: np.ndarray, plane: Plane) -> np.ndarray:
+                         valid: np.ndarray, support: np.ndarray, plane: Plane,
+                         apart: frozenset[tuple[int, int]] = frozenset()) -> np.ndarray:
     """The labels with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
     table top and its legs), then every piece that still does not reach the plane (``stands``: too few of its
     points within ``support`` (H, W), m) joined to a neighbouring piece, larger or (standing on the plane) at
@@ -216,9 +220,15 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     ``MIN_SHARED_EDGE`` of its outline; of several, the one with the longest shared edge): a part of an
     object that a depth jump cut off (a duck's head and back, larger than the breast below them). A piece behind
     its neighbour stays apart (an object partly hidden by the target), and so does one that is well in front of
-    it (a ball whose lowest visible points are high on its curve, before a box behind it)."""
+    it (a ball whose lowest visible points are high on its curve, before a box behind it). Pieces that ``apart``
+    pairs (``split_touching``: two objects) never join, nor do the pieces they have joined."""
     depth = np.where(valid, points[..., 2], 0.0)
     labels = labels.copy()
+    owner = np.arange(count)  # the piece each original piece has joined
+
+    def may_join(piece: int, other: int) -> bool:
+        return not any({owner[first], owner[second]} == {piece, other} for first, second in apart)
+
     kernel = np.ones((3, 3), np.uint8)
     areas = np.bincount(labels.ravel(), minlength=count)
     standing = np.zeros(count, bool)
@@ -231,8 +241,9 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
         inside = labels == piece
         ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
         for other in _carriers_beneath(piece, inside, ring, labels, height, points, valid, plane):
-            if areas[other] < areas[piece]:
+            if areas[other] < areas[piece] and may_join(piece, other):
                 labels[labels == other] = piece
+                owner[owner == other] = piece
                 areas[piece] += areas[other]
                 areas[other] = 0
                 standing[piece] |= standing[other]
@@ -244,8 +255,8 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
         neighbours, shared = np.unique(labels[ring], return_counts=True)
         best, best_shared = 0, 0
         for other, length in zip(neighbours, shared):
-            if other == 0 or other == piece or not (areas[other] > areas[piece]
-                                                    or (standing[other] and 2 * areas[other] >= areas[piece])):
+            if other == 0 or other == piece or not may_join(piece, other) or not (
+                    areas[other] > areas[piece] or (standing[other] and 2 * areas[other] >= areas[piece])):
                 continue
             edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside & valid
             behind = ring & (labels == other) & valid
@@ -256,6 +267,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
                 best, best_shared = other, length
         if best:
             labels[inside] = best
+            owner[owner == piece] = best
             areas[best] += areas[piece]
             areas[piece] = 0
     return labels
@@ -328,6 +340,16 @@ def concave_creases(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return crease
 
 
+def _opened(labels: np.ndarray) -> np.ndarray:
+    """(H, W) bool: each piece after a morphological opening by a disc of ``NECK_RADIUS`` px: what is left without
+    its thin necks and limbs (where a box meets a table top's corner; a table's legs)."""
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * NECK_RADIUS + 1,) * 2)
+    opened = np.zeros(labels.shape, bool)
+    for piece in np.unique(labels[labels > 0]):
+        opened |= cv2.morphologyEx((labels == piece).astype(np.uint8), cv2.MORPH_OPEN, disc).astype(bool)
+    return opened
+
+
 def _nearest_fill(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
     """``seeds`` (H, W) int (0: unlabelled) with every pixel of ``region`` (H, W) bool given the label of the nearest
     seed."""
@@ -339,17 +361,21 @@ def _nearest_fill(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
 
 
 def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: np.ndarray, footing: np.ndarray,
-                   rgb: np.ndarray) -> tuple[int, np.ndarray]:
-    """(count, labels) with pieces cut apart where two objects touch without a depth jump. A piece is cut along its
-    concave creases (``concave_creases``) into parts (smaller ones, and the crease, go to the nearest large part);
-    two neighbouring parts stay apart only when each stands on the plane by itself (``stands``: its ``height`` (H, W)
-    under ``footing`` (H, W)) and their median colours differ by more than ``OBJECT_COLOUR_DELTA`` (Delta E):
-    two objects side by side. Otherwise they join again: a duck's head and body (one stands), a marker on a ball."""
-    crease = concave_creases(points, labels)
+                   rgb: np.ndarray) -> tuple[int, np.ndarray, frozenset[tuple[int, int]]]:
+    """(count, labels, the pairs of labels cut apart) with pieces cut apart where two objects touch without a depth
+    jump. A piece is cut along its concave creases (``concave_creases``) and its thin necks (``_opened``) into parts
+    (smaller ones, and the cut, go to the nearest large part); two neighbouring parts stay apart only when each
+    stands on the plane by itself (``stands``: its ``height`` (H, W) under ``footing`` (H, W)) and their median
+    chromaticities differ by more than ``OBJECT_CHROMA_DELTA``: two objects side by side (a box against a toy
+    table's top). Otherwise they join again: a duck's head and body (one stands), a marker on a ball, a table's
+    legs and top (too thin to be a large part)."""
+    crease = cv2.dilate(concave_creases(points, labels).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    crease |= (labels > 0) & ~_opened(labels)  # a cut with no gaps, and the thin necks where two objects meet
+    cut_pairs: set[tuple[int, int]] = set()
     if not crease.any():
-        return count, labels
-    crease = cv2.dilate(crease.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)  # a cut with no gaps
-    lab = cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+        return count, labels, frozenset(cut_pairs)
+    chroma = rgb.astype(np.float64) + 1.0
+    chroma /= chroma.sum(axis=-1, keepdims=True)
     labels = labels.copy()
     reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (4 * CREASE_STEP + 1,) * 2)
     for piece in np.unique(labels[crease & (labels > 0)]):
@@ -361,20 +387,22 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
             continue
         parts = _nearest_fill(np.where(np.isin(parts, large), parts, 0), inside)
         alone = {part: stands(height[parts == part], footing[parts == part]) for part in large}
-        colour = {part: np.median(lab[parts == part], axis=0) for part in large}
+        colour = {part: np.median(chroma[parts == part], axis=0) for part in large}
         group = {part: part for part in large}
         for part in large:
             near = cv2.dilate((parts == part).astype(np.uint8), reach).astype(bool) & inside
             for other in np.unique(parts[near]):
                 apart = (alone[part] and alone[other]
-                         and np.linalg.norm(colour[part] - colour[other]) > OBJECT_COLOUR_DELTA)
+                         and np.linalg.norm(colour[part] - colour[other]) > OBJECT_CHROMA_DELTA)
                 if other > part and not apart:
                     _union(group, part, int(other))
         roots = sorted({_root(group, part) for part in large}, key=lambda root: -areas[root])
-        for index, root in enumerate(roots[1:]):
-            labels[inside & np.isin(parts, [part for part in large if _root(group, part) == root])] = count + index
+        new = [int(piece)] + [count + index for index in range(len(roots) - 1)]
+        for label, root in zip(new[1:], roots[1:]):
+            labels[inside & np.isin(parts, [part for part in large if _root(group, part) == root])] = label
+        cut_pairs |= {(first, second) for index, first in enumerate(new) for second in new[index + 1:]}
         count += len(roots) - 1
-    return count, labels
+    return count, labels, frozenset(cut_pairs)
 
 
 def _root(group: dict[int, int], part: int) -> int:
@@ -521,9 +549,9 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     threshold = _tolerance(depth, MIN_HEIGHT, 0.015)
     count, labels = _pieces(valid & (height > threshold), depth, valid)
     known_height = np.where(valid, height, 0.0)
-    count, labels = split_touching(labels, count, points, known_height, threshold + FOOT_BAND, view.rgb)
+    count, labels, apart = split_touching(labels, count, points, known_height, threshold + FOOT_BAND, view.rgb)
     labels = merge_carried_pieces(labels, count, known_height, points, valid, _tolerance(depth, SUPPORT_HEIGHT, 0.05),
-                                  plane)
+                                  plane, apart)
     on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
     labels = drop_scenery(labels, count, known_height)
     piece = target_piece(labels, count, view.roi)
