@@ -37,7 +37,7 @@ MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
 CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
 SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough points this close to the plane
 # (``stands``) stands on it (a curved bottom starts a few cm up); one without is carried by another piece
-FOOT_SHARE = 0.01  # of a piece's readings that must lie within SUPPORT_HEIGHT of the plane for it to stand on it
+FOOT_SHARE = 0.005  # of a piece's readings that must lie within SUPPORT_HEIGHT of the plane for it to stand on it
 FOOT_PIXELS = 10  # ... and at least this many: a thin leg in sight is enough, a speck of noise is not
 ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
 # 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
@@ -368,7 +368,8 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
     stands on the plane by itself (``stands``: its ``height`` (H, W) under ``footing`` (H, W)) and their median
     chromaticities differ by more than ``OBJECT_CHROMA_DELTA``: two objects side by side (a box against a toy
     table's top). Otherwise they join again: a duck's head and body (one stands), a marker on a ball, a table's
-    legs and top (too thin to be a large part)."""
+    legs and top (too thin to be a large part). A piece that runs out of the image is left whole: what lies beyond
+    cannot be judged (a wall behind the table, its tiles in different colours)."""
     crease = cv2.dilate(concave_creases(points, labels).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     crease |= (labels > 0) & ~_opened(labels)  # a cut with no gaps, and the thin necks where two objects meet
     cut_pairs: set[tuple[int, int]] = set()
@@ -378,7 +379,7 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
     chroma /= chroma.sum(axis=-1, keepdims=True)
     labels = labels.copy()
     reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (4 * CREASE_STEP + 1,) * 2)
-    for piece in np.unique(labels[crease & (labels > 0)]):
+    for piece in np.setdiff1d(np.unique(labels[crease & (labels > 0)]), border_labels(labels)):
         inside = labels == piece
         parts_count, parts = cv2.connectedComponents((inside & ~crease).astype(np.uint8), connectivity=4)
         areas = np.bincount(parts.ravel(), minlength=parts_count)
@@ -470,6 +471,11 @@ def drop_scenery(labels: np.ndarray, count: int, height: np.ndarray) -> np.ndarr
     return np.where(tops[labels] > MAX_OBJECT_HEIGHT, 0, labels)
 
 
+def border_labels(labels: np.ndarray) -> np.ndarray:
+    """The labels (sorted, unique) found on the image border: pieces that run out of the image."""
+    return np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+
+
 def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] | None) -> np.ndarray:
     """The target's piece (H, W) bool: the one with most pixels inside ``roi``; else, among the pieces that do not
     touch the image border (if any), the largest of those whose centroid is within ``CENTRE_MARGIN`` of the one
@@ -488,8 +494,7 @@ def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] 
         inside = np.bincount(window.ravel(), minlength=count)[candidates]
         if inside.max() > 0:
             return labels == candidates[int(np.argmax(inside))]
-    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    inner = candidates[~np.isin(candidates, border)]
+    inner = candidates[~np.isin(candidates, border_labels(labels))]
     candidates = inner if len(inner) else candidates
     rows, cols = np.indices(labels.shape)
     sums_r = np.bincount(labels.ravel(), weights=rows.ravel(), minlength=count)

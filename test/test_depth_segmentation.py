@@ -217,6 +217,17 @@ def test_one_object_is_not_cut_at_its_own_folds_or_colours(challenge, seed, scen
     assert mask_iou(depth_cut(view).mask, truth) > 0.95, note
 
 
+def test_a_wall_running_out_of_the_image_is_not_cut_into_tiles_that_compete_with_the_target():
+    """Depth noise on a far wall of coloured tiles makes folds; cut there, a low band of the wall no longer
+    touches the border and sits nearer the centre than the off-centre duck (IoU 0 before pieces on the border
+    were left whole)."""
+    from bench.mask_quality import challenge_view
+    from idpose_core.preprocessing import mask_iou
+
+    view, truth = challenge_view("off_centre", 18, seed=9104, size=320, depth_noise=0.003)
+    assert mask_iou(depth_cut(view).mask, truth) > 0.95
+
+
 def test_a_camera_looking_steeply_down_still_finds_the_table():
     """The table seen nearly face on (its normal 10 deg from the optical axis, under the 0.3 the image top must take
     from it without gravity): the steep-view fallback finds it (before: no plane, GrabCut on colour)."""
