@@ -31,6 +31,7 @@ UP_TOLERANCE_DEG = 30.0  # the plane normal vs gravity's up (when known)
 IMAGE_UP_MIN = 0.3  # without gravity: the normal's component towards the top of the image at least this
 STEEP_UP_MIN = 0.05  # ... or this, when no plane tilted as much holds enough points: a camera looking steeply down
 # sees the table nearly face on (a wall faces a camera that looks down with a normal towards the image bottom)
+STEEP_GAIN = 2.0  # ... or when such a flatter plane holds this many times the readings of the tilted one
 MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
 MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
@@ -116,8 +117,8 @@ def _tolerance(depth: np.ndarray, base: float, share: float) -> np.ndarray:
 def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Generator) -> Plane:
     """The largest plane among ``points`` (M, 3) that can carry an object: its normal within
     ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top by
-    ``IMAGE_UP_MIN`` (or only ``STEEP_UP_MIN`` when no such plane holds enough points: a camera looking
-    steeply down). DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
+    ``IMAGE_UP_MIN`` (or only ``STEEP_UP_MIN`` when no such plane holds enough points, or when the flatter one
+    holds ``STEEP_GAIN`` times as many: a camera looking steeply down). DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
     if len(points) < 3:
         raise DepthSegmentationError("too few depth readings to find a support plane")
     scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]
@@ -138,14 +139,16 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     offsets = -np.sum(normals * anchors, axis=1)
     inliers = np.abs(scored @ normals.T + offsets) < tolerance  # (sample, hypotheses)
     counts = inliers.sum(axis=0)
-    for usable in tiers:
-        best = int(np.argmax(np.where(usable, counts, -1)))
-        share = float(inliers[:, best].mean()) if usable.any() else 0.0
-        if share >= MIN_PLANE_SHARE:
-            break
-    else:
+    bests = [int(np.argmax(np.where(usable, counts, -1))) for usable in tiers]
+    shares = [float(inliers[:, best].mean()) if usable.any() else 0.0 for best, usable in zip(bests, tiers)]
+    chosen = next((tier for tier, share in enumerate(shares) if share >= MIN_PLANE_SHARE), None)
+    if chosen is not None and shares[-1] >= STEEP_GAIN * shares[chosen]:
+        chosen = len(tiers) - 1  # the table seen steeply: a tilted plane only grazed it in a band
+    if chosen is None:
+        share = shares[-1]
         raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * share:.0f} % "
                                      f"of the readings, {100 * MIN_PLANE_SHARE:.0f} % needed)")
+    best = bests[chosen]
     on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
     centre = on_plane.mean(axis=0)
     normal = np.linalg.svd(on_plane - centre)[2][2]

@@ -244,6 +244,17 @@ def test_a_camera_looking_steeply_down_still_finds_the_table():
     assert np.degrees(np.arccos(np.clip(cut.plane.normal @ up, -1, 1))) < 1.0
 
 
+def test_a_table_seen_steeply_is_not_taken_for_a_tilted_plane_grazing_it():
+    """From a camera looking steeply down, a plane tilted towards the image top passes through the table in a band
+    (a third of the readings) while the table itself holds most of them: the flatter plane wins (IoU 0.15 when the
+    tilted one did)."""
+    from bench.mask_quality import challenge_view
+    from idpose_core.preprocessing import mask_iou
+
+    view, truth = challenge_view("off_centre", 9, seed=9508, size=320)
+    assert mask_iou(depth_cut(view).mask, truth) > 0.95
+
+
 def test_a_toy_table_with_one_leg_in_sight_stands_and_stays_apart_from_a_box_behind():
     """A toy table top before a box, one thin leg in sight (2 % of the piece): the leg makes the top stand, so it is
     not taken as a part of the box it stands in front of (0.59 when it was)."""
