@@ -118,7 +118,8 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     """The largest plane among ``points`` (M, 3) that can carry an object: its normal within
     ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top by
     ``IMAGE_UP_MIN`` (or only ``STEEP_UP_MIN`` when no such plane holds enough points, or when the flatter one
-    holds ``STEEP_GAIN`` times as many: a camera looking steeply down). DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the points."""
+    holds ``STEEP_GAIN`` times as many: a camera looking steeply down). DepthSegmentationError when no plane
+    holds ``MIN_PLANE_SHARE`` of the points."""
     if len(points) < 3:
         raise DepthSegmentationError("too few depth readings to find a support plane")
     scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]

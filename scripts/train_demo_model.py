@@ -13,7 +13,7 @@ rest are the clean renders. The share is 0 while the model first learns to read 
 budget), then grows linearly to ``--robot-share`` over ``--robot-ramp`` of the budget. The loss gap and the
 inversion check are logged on held-out clean pairs and on held-out robot crops.
 
-    python scripts/train_demo_model.py        # 2.5 hours on 2 cores with the rendering (the shipped model: --minutes 150)
+    python scripts/train_demo_model.py    # 2.5 hours on 2 cores with the rendering (the shipped model: --minutes 150)
 """
 from __future__ import annotations
 
