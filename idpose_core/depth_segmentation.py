@@ -146,8 +146,7 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     if chosen is not None and shares[-1] >= STEEP_GAIN * shares[chosen]:
         chosen = len(tiers) - 1  # the table seen steeply: a tilted plane only grazed it in a band
     if chosen is None:
-        share = shares[-1]
-        raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * share:.0f} % "
+        raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * shares[-1]:.0f} % "
                                      f"of the readings, {100 * MIN_PLANE_SHARE:.0f} % needed)")
     best = bests[chosen]
     on_plane = scored[inliers[:, best]]  # least squares on the inliers for a steadier plane
