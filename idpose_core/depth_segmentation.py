@@ -34,6 +34,7 @@ STEEP_UP_MIN = 0.05  # ... or this, when no plane tilted as much holds enough po
 STEEP_GAIN = 2.0  # ... or when such a flatter plane holds this many times the readings of the tilted one
 MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
+SLANT_TOLERANCE = 0.5  # of a depth step: one within this of the steps either side continues a slanted surface
 MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
 CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
 SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough points this close to the plane
@@ -168,9 +169,27 @@ def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[in
         second = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
         both = valid[first] & valid[second]
         nearer = np.minimum(depth[first], depth[second])
-        jump[first] |= both & (np.abs(depth[first] - depth[second]) > DEPTH_JUMP * nearer)
+        steep = both & (np.abs(depth[first] - depth[second]) > DEPTH_JUMP * nearer)
+        jump[first] |= steep & ~_slanted(depth, valid, axis)
     count, labels = cv2.connectedComponents((above & ~jump).astype(np.uint8), connectivity=4)
     return count, labels
+
+
+def _slanted(depth: np.ndarray, valid: np.ndarray, axis: int) -> np.ndarray:
+    """(H - 1, W) for ``axis`` 0, (H, W - 1) for 1: whether the step between each pixel and the next along
+    ``axis`` continues the steps on either side of it (inverse depth, linear across the image on a plane, changes
+    by the same amount within ``SLANT_TOLERANCE``): a surface seen at a grazing angle (a toy table's top seen
+    from level with it), not the edge of one surface in front of another."""
+    inverse = np.where(valid, 1.0 / np.where(valid, depth, 1.0), np.nan)
+    step = np.diff(inverse, axis=axis)
+    pad = [(0, 0), (0, 0)]
+    pad[axis] = (1, 1)
+    padded = np.pad(step, pad, constant_values=np.nan)
+    before = padded[(slice(None, -2), slice(None)) if axis == 0 else (slice(None), slice(None, -2))]
+    after = padded[(slice(2, None), slice(None)) if axis == 0 else (slice(None), slice(2, None))]
+    limit = SLANT_TOLERANCE * np.abs(step)
+    with np.errstate(invalid="ignore"):
+        return (np.abs(step - before) <= limit) & (np.abs(step - after) <= limit)
 
 
 def _gap(front: np.ndarray, back: np.ndarray) -> float:
@@ -517,7 +536,8 @@ def _fill_holes(mask: np.ndarray) -> np.ndarray:
 
 
 def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """GrabCut on a window around ``seed`` (H, W) bool: the seed but its outermost pixels is object,
+    """GrabCut on a window around ``seed`` (H, W) bool: the seed but its outermost pixels is object, and so are its
+    parts too thin to have an inside (a toy table's legs, its top seen edge on, whatever their colour);
     ``background`` and what lies beyond a band around the seed are background, the rest is left to the
     colours. Seeds OpenCV's RNG."""
     x, y, w, h = cv2.boundingRect(seed.astype(np.uint8))
@@ -525,6 +545,7 @@ def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) ->
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
     edge = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * CORE_MARGIN + 1, 2 * CORE_MARGIN + 1))
     core = cv2.erode(seed.astype(np.uint8), edge).astype(bool)
+    core |= seed & ~cv2.morphologyEx(seed.astype(np.uint8), cv2.MORPH_OPEN, edge).astype(bool)
     reach = cv2.dilate(seed.astype(np.uint8), kernel).astype(bool)
     labels = np.full(seed.shape, cv2.GC_BGD, np.uint8)
     labels[reach] = cv2.GC_PR_BGD
