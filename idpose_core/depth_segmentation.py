@@ -39,8 +39,8 @@ MIN_PIECE_SHARE = 0.002  # of the image: smaller pieces are noise
 CENTRE_MARGIN = 0.05  # of the image size: pieces this much farther from the centre than the nearest one compete
 SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough points this close to the plane
 # (``stands``) stands on it (a curved bottom starts a few cm up); one without is carried by another piece
-FOOT_SHARE = 0.005  # of a piece's readings that must lie within SUPPORT_HEIGHT of the plane for it to stand on it
-FOOT_PIXELS = 10  # ... and at least this many: a thin leg in sight is enough, a speck of noise is not
+FOOT_SHARE = 0.004  # of a piece's readings that must lie within SUPPORT_HEIGHT of the plane for it to stand on it
+FOOT_PIXELS = 8  # ... and at least this many: a thin leg in sight is enough, a speck of noise is not
 ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
 # 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
 CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most of its points along their shared
@@ -382,6 +382,20 @@ def _nearest_fill(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
     return np.where(region, lookup[nearest], seeds)
 
 
+def _grown(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """``seeds`` (H, W) int (0: unlabelled) grown through ``region`` (H, W) bool a pixel at a time: each pixel of the
+    region gets the label that reaches it first along the region (a table's thin leg goes to the top it hangs
+    from, not to a box that stands nearer its foot). What no seed reaches stays 0."""
+    grown = seeds.astype(np.uint16)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    while True:
+        reaching = cv2.dilate(grown, cross)
+        reached = region & (grown == 0) & (reaching > 0)
+        if not reached.any():
+            return grown.astype(seeds.dtype)
+        grown[reached] = reaching[reached]
+
+
 def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: np.ndarray, footing: np.ndarray,
                    rgb: np.ndarray) -> tuple[int, np.ndarray, frozenset[tuple[int, int]]]:
     """(count, labels, the pairs of labels cut apart) with pieces cut apart where two objects touch without a depth
@@ -408,7 +422,7 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
         large = [part for part in range(1, parts_count) if areas[part] >= MIN_PIECE_SHARE * labels.size]
         if len(large) < 2:
             continue
-        parts = _nearest_fill(np.where(np.isin(parts, large), parts, 0), inside)
+        parts = _nearest_fill(_grown(np.where(np.isin(parts, large), parts, 0), inside), inside)
         alone = {part: stands(height[parts == part], footing[parts == part]) for part in large}
         colour = {part: np.median(chroma[parts == part], axis=0) for part in large}
         group = {part: part for part in large}

@@ -188,6 +188,10 @@ def test_a_table_top_touching_a_crate_at_one_corner_is_not_carried_by_it():
     ("touching", 7001, 23, 0.9, "a box under a toy table's corner: cut at the neck, then kept from the carrier rule"),
     ("touching", 9003, 5, 0.9, "a crate against a toy table's top seen from high, one leg's foot in sight: 0.53 "
                                "while a part needed 1 % of its points near the table to stand"),
+    ("touching", 1000, 11, 0.85, "a crate against a toy table's top, a thin leg's foot near the crate: 0.32 while "
+                                 "the leg went to the nearest part (the crate) and the top did not stand"),
+    ("touching", 9205, 10, 0.95, "a brick whose marker touches the box beside it: 0.46 while the marker, cut off "
+                                 "at a neck, went to the nearest part"),
 ])
 def test_two_objects_touching_without_a_depth_jump_are_cut_apart_at_the_fold(challenge, seed, scene, bound, note):
     """Where a box touches the target with no depth jump, the piece is cut at the concave fold between them: both
@@ -309,3 +313,18 @@ def test_a_toy_table_seen_level_with_its_top_keeps_the_top_and_its_legs():
     for challenge, scene, seed in (("backdrop", 5, 9104), ("clutter", 11, 9508)):
         view, truth = challenge_view(challenge, scene, seed=seed, size=320)
         assert mask_iou(depth_cut(view).mask, truth) > 0.95, (challenge, scene, seed)
+
+
+def test_a_thin_leg_goes_to_the_part_it_hangs_from_not_to_the_nearest():
+    """A leg hanging from a top, its foot a few pixels from a box that it does not touch: grown along the piece, the
+    leg joins the top (by straight-line distance its foot would go to the box, and the top would not stand)."""
+    from idpose_core.depth_segmentation import _grown
+
+    seeds = np.zeros((60, 60), np.int32)
+    seeds[5:10, 5:40] = 1  # the top
+    seeds[30:60, 30:60] = 2  # the box
+    region = seeds > 0
+    region[10:55, 24:27] = True  # the leg, 3 px left of the box at its foot
+    grown = _grown(np.where(region & (seeds == 0), 0, seeds), region)
+    assert (grown[10:55, 24:27] == 1).all()
+    assert (grown[seeds == 2] == 2).all()
