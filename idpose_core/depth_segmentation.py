@@ -32,6 +32,7 @@ IMAGE_UP_MIN = 0.3  # without gravity: the normal's component towards the top of
 STEEP_UP_MIN = 0.05  # ... or this, when no plane tilted as much holds enough points: a camera looking steeply down
 # sees the table nearly face on (a wall faces a camera that looks down with a normal towards the image bottom)
 STEEP_GAIN = 2.0  # ... or when such a flatter plane holds this many times the readings of the tilted one
+BAND_OVERLAP = 0.5  # ... and this much of the tilted one's readings: it grazes the table in a band (not a wall)
 MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
 DEPTH_JUMP = 0.03  # relative depth step between neighbours that separates two pieces
 SLANT_TOLERANCE = 0.5  # of a depth step: one within this of the steps either side continues a slanted surface
@@ -119,8 +120,9 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     """The largest plane among ``points`` (M, 3) that can carry an object: its normal within
     ``UP_TOLERANCE_DEG`` of ``up`` (optical frame) when given, else tilted towards the image top by
     ``IMAGE_UP_MIN`` (or only ``STEEP_UP_MIN`` when no such plane holds enough points, or when the flatter one
-    holds ``STEEP_GAIN`` times as many: a camera looking steeply down). DepthSegmentationError when no plane
-    holds ``MIN_PLANE_SHARE`` of the points."""
+    holds ``STEEP_GAIN`` times as many, among them ``BAND_OVERLAP`` of the tilted one's: a camera looking steeply
+    down, not a wall before a table). DepthSegmentationError when no plane holds ``MIN_PLANE_SHARE`` of the
+    points."""
     if len(points) < 3:
         raise DepthSegmentationError("too few depth readings to find a support plane")
     scored = points[rng.choice(len(points), size=min(RANSAC_SAMPLE, len(points)), replace=False)]
@@ -145,7 +147,9 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     shares = [float(inliers[:, best].mean()) if usable.any() else 0.0 for best, usable in zip(bests, tiers)]
     chosen = next((tier for tier, share in enumerate(shares) if share >= MIN_PLANE_SHARE), None)
     if chosen is not None and shares[-1] >= STEEP_GAIN * shares[chosen]:
-        chosen = len(tiers) - 1  # the table seen steeply: a tilted plane only grazed it in a band
+        tilted, flatter = inliers[:, bests[chosen]], inliers[:, bests[-1]]
+        if (tilted & flatter).sum() >= BAND_OVERLAP * tilted.sum():
+            chosen = len(tiers) - 1  # the table seen steeply: a tilted plane only grazed it in a band
     if chosen is None:
         raise DepthSegmentationError(f"no support plane in the depth image (the best holds {100 * shares[-1]:.0f} % "
                                      f"of the readings, {100 * MIN_PLANE_SHARE:.0f} % needed)")
@@ -513,11 +517,12 @@ def border_labels(labels: np.ndarray) -> np.ndarray:
 
 
 def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] | None) -> np.ndarray:
-    """The target's piece (H, W) bool: the one with most pixels inside ``roi``; else, among the pieces that do not
-    touch the image border (if any), the largest of those whose centroid is within ``CENTRE_MARGIN`` of the one
-    nearest the image centre (a part standing on the target, split from it at a depth jump, is near the
-    centre too, and smaller). Pieces under ``MIN_PIECE_SHARE`` of the image are ignored; DepthSegmentationError
-    when none is left."""
+    """The target's piece (H, W) bool: the one with most pixels inside ``roi`` among those it holds at least half
+    of (a larger object nearer the camera may reach into a detector's loose box), or among all; else, among the
+    pieces that do not touch the image border (if any), the largest of those whose centroid is within
+    ``CENTRE_MARGIN`` of the one nearest the image centre (a part standing on the target, split from it at a
+    depth jump, is near the centre too, and smaller). Pieces under ``MIN_PIECE_SHARE`` of the image are ignored;
+    DepthSegmentationError when none is left."""
     height, width = labels.shape
     areas = np.bincount(labels.ravel(), minlength=count)
     areas[0] = 0
@@ -528,8 +533,9 @@ def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] 
         x, y, w, h = roi
         window = labels[max(y, 0):y + h, max(x, 0):x + w]
         inside = np.bincount(window.ravel(), minlength=count)[candidates]
+        held = inside * (2 * inside >= areas[candidates])  # pieces the box holds at least half of
         if inside.max() > 0:
-            return labels == candidates[int(np.argmax(inside))]
+            return labels == candidates[int(np.argmax(held if held.max() > 0 else inside))]
     inner = candidates[~np.isin(candidates, border_labels(labels))]
     candidates = inner if len(inner) else candidates
     rows, cols = np.indices(labels.shape)
