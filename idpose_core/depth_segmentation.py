@@ -168,23 +168,24 @@ def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[in
     closed = cv2.morphologyEx(above.astype(np.uint8), cv2.MORPH_CLOSE, kernel).astype(bool)
     above = above | (closed & ~valid)
     jump = np.zeros_like(above)
+    inverse = np.where(valid, 1.0 / np.where(valid, depth, 1.0), np.nan)
     for axis in (0, 1):
         first = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
         second = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
         both = valid[first] & valid[second]
         nearer = np.minimum(depth[first], depth[second])
         steep = both & (np.abs(depth[first] - depth[second]) > DEPTH_JUMP * nearer)
-        jump[first] |= steep & ~_slanted(depth, valid, axis)
+        jump[first] |= steep & ~_slanted(inverse, axis)
     count, labels = cv2.connectedComponents((above & ~jump).astype(np.uint8), connectivity=4)
     return count, labels
 
 
-def _slanted(depth: np.ndarray, valid: np.ndarray, axis: int) -> np.ndarray:
+def _slanted(inverse: np.ndarray, axis: int) -> np.ndarray:
     """(H - 1, W) for ``axis`` 0, (H, W - 1) for 1: whether the step between each pixel and the next along
-    ``axis`` continues the steps on either side of it (inverse depth, linear across the image on a plane, changes
-    by the same amount within ``SLANT_TOLERANCE``): a surface seen at a grazing angle (a toy table's top seen
-    from level with it), not the edge of one surface in front of another."""
-    inverse = np.where(valid, 1.0 / np.where(valid, depth, 1.0), np.nan)
+    ``axis`` continues the steps on either side of it (``inverse`` depth (H, W), 1/m, NaN without a reading, is
+    linear across the image on a plane and changes by the same amount within ``SLANT_TOLERANCE``): a surface seen
+    at a grazing angle (a toy table's top seen from level with it), not the edge of one surface in front of
+    another."""
     step = np.diff(inverse, axis=axis)
     pad = [(0, 0), (0, 0)]
     pad[axis] = (1, 1)
@@ -560,13 +561,14 @@ def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) ->
     parts too thin to have an inside (a toy table's legs, its top seen edge on, whatever their colour);
     ``background`` and what lies beyond a band around the seed are background, the rest is left to the
     colours. Seeds OpenCV's RNG."""
-    x, y, w, h = cv2.boundingRect(seed.astype(np.uint8))
+    seed_u8 = seed.astype(np.uint8)
+    x, y, w, h = cv2.boundingRect(seed_u8)
     band = max(2, int(round(GRABCUT_BAND * math.hypot(w, h))))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
     edge = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * CORE_MARGIN + 1, 2 * CORE_MARGIN + 1))
-    core = cv2.erode(seed.astype(np.uint8), edge).astype(bool)
-    core |= seed & ~cv2.morphologyEx(seed.astype(np.uint8), cv2.MORPH_OPEN, edge).astype(bool)
-    reach = cv2.dilate(seed.astype(np.uint8), kernel).astype(bool)
+    core = cv2.erode(seed_u8, edge).astype(bool)
+    core |= seed & ~cv2.morphologyEx(seed_u8, cv2.MORPH_OPEN, edge).astype(bool)
+    reach = cv2.dilate(seed_u8, kernel).astype(bool)
     labels = np.full(seed.shape, cv2.GC_BGD, np.uint8)
     labels[reach] = cv2.GC_PR_BGD
     labels[seed] = cv2.GC_PR_FGD

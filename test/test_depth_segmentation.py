@@ -42,6 +42,13 @@ def table_scene(holes: float = 0.0, seed: int = 0) -> tuple[np.ndarray, np.ndarr
     return depth.astype(np.float32), truth, up
 
 
+def plane_depth(normal: np.ndarray, distance: float) -> np.ndarray:
+    """Depth (H, W) along each pixel's ray to the plane ``normal . p + distance = 0`` (``normal`` unit, towards the
+    camera, ``distance`` m away); NaN where the ray never meets it."""
+    towards = -(rays() @ normal)
+    return distance / np.where(towards > 1e-6, towards, np.nan)
+
+
 def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / (a | b).sum())
 
@@ -276,13 +283,13 @@ def test_a_surface_seen_at_a_grazing_angle_is_one_piece_and_a_step_between_two_s
 
     grazing = math.radians(3.0)
     up = np.array([0.0, -math.cos(grazing), -math.sin(grazing)])
-    table = (0.05 / np.clip(-(rays() @ up), 1e-6, None))[SIZE // 2:SIZE // 2 + 25]  # 5 cm below the camera: 0.25-1 m
+    table = plane_depth(up, 0.05)[SIZE // 2:SIZE // 2 + 25]  # 5 cm below the camera: 0.25-1 m
     steps = np.abs(np.diff(table, axis=0)) / table[1:]
     assert steps.min() > DEPTH_JUMP
-    assert _slanted(table, np.ones(table.shape, bool), axis=0)[1:-1].all()  # the first and last have one side
+    assert _slanted(1.0 / table, axis=0)[1:-1].all()  # the first and last have one side
     wall = np.full((SIZE, SIZE), 1.0)
     wall[:, :80] -= 0.08
-    slanted = _slanted(wall, np.ones(wall.shape, bool), axis=1)
+    slanted = _slanted(1.0 / wall, axis=1)
     assert not slanted[:, 79].any()
     assert slanted[:, 1:78].all()
 
@@ -325,7 +332,7 @@ def test_a_thin_leg_goes_to_the_part_it_hangs_from_not_to_the_nearest():
     seeds[30:60, 30:60] = 2  # the box
     region = seeds > 0
     region[10:55, 24:27] = True  # the leg, 3 px left of the box at its foot
-    grown = _grown(np.where(region & (seeds == 0), 0, seeds), region)
+    grown = _grown(seeds, region)
     assert (grown[10:55, 24:27] == 1).all()
     assert (grown[seeds == 2] == 2).all()
 
@@ -339,10 +346,9 @@ def test_a_wall_facing_the_camera_is_not_taken_for_a_table_seen_steeply():
 
     tilt = math.radians(15.0)
     up = np.array([0.0, -math.cos(tilt), -math.sin(tilt)])
-    r = rays()
-    table = 0.3 / np.where(-(r @ up) > 1e-6, -(r @ up), np.nan)  # the camera 30 cm above the table
-    facing = np.array([0.0, -0.06, -1.0]) / np.linalg.norm([0.0, -0.06, -1.0])
-    wall = 0.5 / np.where(-(r @ facing) > 1e-6, -(r @ facing), np.nan)
+    table = plane_depth(up, 0.3)  # the camera 30 cm above the table
+    facing = np.array([0.0, -0.06, -1.0])
+    wall = plane_depth(facing / np.linalg.norm(facing), 0.5)
     depth = np.fmin(table, wall)
     assert np.mean(wall <= np.nan_to_num(table, nan=np.inf)) > 0.75
     points, valid = backproject(depth.astype(np.float32), K)
