@@ -1,19 +1,23 @@
 #!/usr/bin/env python3
-"""Train the embedded demo model on pybullet renders of the demo objects, on the CPU, resumably.
+"""Train the embedded model on pybullet renders of many objects, on the CPU, in resumable chunks.
 
-Renders its own data (cached as .npz in --work-dir), trains the small view-conditioned diffusion
-model with an EMA of its weights, checkpoints every few minutes (rerun the same command to resume),
-shows a progress bar with the loss and the true-vs-wrong-pose loss gap, logs the gap and a grid-search
-inversion check (RotAcc on held-out views) to ``curve.csv`` and finally writes the EMA weights,
-``solver_defaults.json`` and ``training.json`` into --out.
+Renders its own data (cached as .npz in --work-dir): the six demo objects from many cameras, and the training
+catalogue (``idpose_core.synthetic.catalogue``: ``random_urdfs`` blobs 000-799, composed toys, recoloured
+``pybullet_data`` meshes) from fewer cameras each. Trains the small view-conditioned diffusion model on view
+pairs of one object with their relative pose (no absolute view: the model must read the pose from the pair, so it
+works on objects it never saw), with an EMA of its weights and a cosine learning rate over the whole ``--minutes``
+budget. One sitting trains at most ``--chunk-minutes`` and ends with a checkpoint and the model folder; rerun the
+same command to go on (from the checkpoint in --work-dir, or, on another machine, from a model folder given by
+``--init-from``). Logs the true-vs-wrong-pose loss gap and a grid-search inversion check on held-out objects
+(``random_urdfs`` 800-899 and held-out toys; 900-999 are never used) and on held-out cameras of the demo objects to
+``curve.csv`` against training minutes.
 
-A growing share of the pairs are a robot's crops: the same cameras rendered again under random lamps with
-shadows, in a camera's tone, the reference of each pair augmented by ``idpose_core.demo_model.robot_crops``; the
-rest are the clean renders. The share is 0 while the model first learns to read the pose (``--robot-from`` of the
-budget), then grows linearly to ``--robot-share`` over ``--robot-ramp`` of the budget. The loss gap and the
-inversion check are logged on held-out clean pairs and on held-out robot crops.
+A growing share of the pairs are a robot's crops: the cameras rendered again under random lamps with shadows, in a
+camera's tone, the reference augmented by ``idpose_core.demo_model.robot_crops``. The share is 0 while the model
+first learns to read the pose (``--robot-from`` of the budget), then grows linearly to ``--robot-share`` over
+``--robot-ramp`` of the budget.
 
-    python scripts/train_demo_model.py    # 2.5 hours on 2 cores with the rendering (the shipped model: --minutes 150)
+    python scripts/train_demo_model.py --out idpose_core/assets/demo_model    # 450 min on 2 cores, in 3 sittings
 """
 from __future__ import annotations
 
@@ -39,11 +43,12 @@ from diffusers.training_utils import EMAModel
 from tqdm import tqdm
 
 from idpose_core.cameras import spherical_to_c2w
-from idpose_core.demo_model import EMBEDDED_MODEL_DIR, DemoDiffusionModel, DemoModelConfig, DemoPredictor
+from idpose_core.demo_model import DemoDiffusionModel, DemoModelConfig, DemoPredictor
 from idpose_core.demo_model.grid_check import grid_search, pose_grid, rotation_errors
 from idpose_core.demo_model.training_data import (
     PairBatch,
     PairPool,
+    PairSource,
     RenderedViews,
     RobotCrops,
     cached_lit,
@@ -52,27 +57,44 @@ from idpose_core.demo_model.training_data import (
     random_pairs,
 )
 from idpose_core.metrics import random_pose_errors
+from idpose_core.synthetic.catalogue import CURVE_HELDOUT, heldout_objects, training_objects
 from idpose_core.synthetic.scenes import demo_objects
 
 GAP_TIMESTEPS = (400, 550, 700, 850)  # inside the default training range
 CHECK_AZIMUTHS = 12
 CHECK_POLARS_DEG = (-45.0, 0.0, 45.0)
 WARM_UP = 0.02  # of the wall-time budget
+CHECKPOINT_FILE = "checkpoint.pt"
 
 
 def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=EMBEDDED_MODEL_DIR, help="where the final model goes")
+    parser.add_argument("--out", type=Path, help="where the model folder goes (default: WORK_DIR/model)")
     parser.add_argument("--work-dir", type=Path, default=Path.home() / ".cache" / "idpose_demo_model",
                         help="render cache, checkpoint and curve.csv (not in git)")
-    parser.add_argument("--minutes", type=float, default=147.0,
-                        help="wall-time budget of the training (rendering the data takes about 2 more minutes)")
-    parser.add_argument("--robot-share", type=float, default=0.6, help="share of the pairs that are robot crops")
+    parser.add_argument("--init-from", type=Path,
+                        help="a model folder this script wrote (with training.json): go on from its weights, steps and "
+                             "minutes when WORK_DIR holds no checkpoint (another machine, or a fresh cache)")
+    parser.add_argument("--minutes", type=float, default=450.0,
+                        help="training budget of the whole run, over every sitting: the learning rate and the robot "
+                             "crops' share follow it")
+    parser.add_argument("--chunk-minutes", type=float, default=150.0,
+                        help="most training minutes of this sitting; rendering the data takes about 8 more")
+    parser.add_argument("--demo-share", type=float, default=0.2, help="share of the pairs of the six demo objects")
+    parser.add_argument("--toys", type=int, default=300, help="composed toys in the training catalogue")
+    parser.add_argument("--mesh-variants", type=int, default=4, help="variants of every pybullet_data mesh")
+    parser.add_argument("--blobs", type=int, default=800, help="training blobs (random_urdfs 000..)")
+    parser.add_argument("--catalogue-views", type=int, default=32, help="cameras per catalogue object")
+    parser.add_argument("--catalogue-size", type=int, default=96, help="render size of the catalogue objects")
+    parser.add_argument("--heldout-objects", type=int, default=CURVE_HELDOUT[1],
+                        help="held-out blobs (random_urdfs 800..) and as many held-out toys the curve follows")
+    parser.add_argument("--robot-share", type=float, default=0.5, help="share of the pairs that are robot crops")
     parser.add_argument("--robot-from", type=float, default=0.15,
                         help="share of the budget trained on clean renders only, before robot crops come in")
     parser.add_argument("--robot-ramp", type=float, default=0.25,
                         help="share of the budget over which the robot crops' share grows to --robot-share")
-    parser.add_argument("--lamps", type=int, default=8, help="random lamps per object the cameras are rendered under")
+    parser.add_argument("--lamps", type=int, default=8, help="random lamps per demo object its cameras are rendered "
+                                                             "under (catalogue objects: one each)")
     parser.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (0: budget only)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
@@ -81,37 +103,58 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--ema-decay", type=float, default=0.998)
     parser.add_argument("--t-min", type=int, default=400, help="smallest training timestep")
     parser.add_argument("--t-max", type=int, default=950, help="largest training timestep")
-    parser.add_argument("--train-views", type=int, default=600, help="training cameras per object")
-    parser.add_argument("--heldout-views", type=int, default=60, help="held-out cameras per object")
-    parser.add_argument("--image-size", type=int, default=128, help="render size before preprocessing")
+    parser.add_argument("--train-views", type=int, default=600, help="training cameras per demo object")
+    parser.add_argument("--heldout-views", type=int, default=60, help="held-out cameras per demo object")
+    parser.add_argument("--image-size", type=int, default=128, help="render size of the demo objects")
     parser.add_argument("--window-jitter", type=float, default=0.2, help="window scale 1.5 +- this")
     parser.add_argument("--gap-every", type=int, default=100, help="steps between loss-gap evaluations")
     parser.add_argument("--check-every-minutes", type=float, default=15.0, help="minutes between inversion checks")
-    parser.add_argument("--check-pairs", type=int, default=8)
+    parser.add_argument("--check-pairs", type=int, default=24)
     parser.add_argument("--gap-pairs", type=int, default=32)
     parser.add_argument("--pool", type=int, default=4096, help="pairs kept in the rolling pair pool")
     parser.add_argument("--pool-refresh", type=int, default=8, help="fresh pairs per step")
     parser.add_argument("--checkpoint-every-minutes", type=float, default=3.0)
     parser.add_argument("--block-out-channels", type=int, nargs="+", default=[32, 64, 128])
     parser.add_argument("--layers-per-block", type=int, default=1)
-    parser.add_argument("--view-weight", type=float, default=1.0,
-                        help="weight of the reference-view regression loss (absolute view conditioning)")
     parser.add_argument("--prediction-type", choices=("epsilon", "sample"), default="sample",
                         help="what the UNet outputs: noise, or the clean target (a view-synthesis loss)")
     parser.add_argument("--film", action=argparse.BooleanOptionalAction, default=True,
                         help="timestep+pose embedding scales and shifts every ResNet block (FiLM)")
     parser.add_argument("--token-in-timestep", action=argparse.BooleanOptionalAction, default=True,
                         help="the cc_projection token (reference embedding + pose) also enters the timestep embedding")
-    return parser.parse_args()
+    args = parser.parse_args()
+    args.out = args.out or args.work_dir / "model"
+    return args
 
 
-def load_data(args: argparse.Namespace) -> tuple[RenderedViews, RenderedViews]:
-    """Training and held-out renders of the demo objects (disjoint random cameras)."""
-    specs = demo_objects()
-    train = cached_views(args.work_dir / f"train_{args.seed}.npz", specs, args.train_views, args.image_size, args.seed)
-    heldout = cached_views(args.work_dir / f"heldout_{args.seed}.npz", specs, args.heldout_views, args.image_size,
-                           args.seed + 1000)
-    return train, heldout
+class TrainingData:
+    """Every render the run uses: the demo objects' training and held-out cameras, the training catalogue, the
+    held-out catalogue, each with its robot-crop renders under lamps."""
+
+    def __init__(self, args: argparse.Namespace):
+        work, seed = args.work_dir, args.seed
+        demo = demo_objects()
+        self.demo = cached_views(work / f"train_{seed}.npz", demo, args.train_views, args.image_size, seed)
+        self.demo_heldout = cached_views(work / f"heldout_{seed}.npz", demo, args.heldout_views, args.image_size,
+                                         seed + 1000)
+        self.demo_lit = cached_lit(work / f"lamps_{seed}_{args.lamps}.npz", demo, self.demo, seed + 2000, args.lamps)
+        objects = training_objects(args.toys, args.mesh_variants, args.blobs, seed)
+        self.catalogue = cached_views(work / f"catalogue_{seed}.npz", objects, args.catalogue_views,
+                                      args.catalogue_size, seed + 4000)
+        self.catalogue_lit = cached_lit(work / f"catalogue_lamps_{seed}.npz", objects, self.catalogue, seed + 5000, 1)
+        held = heldout_objects(CURVE_HELDOUT[0], args.heldout_objects, seed)
+        self.novel = cached_views(work / f"novel_{seed}.npz", held, 8, args.catalogue_size, seed + 6000)
+        self.novel_lit = cached_lit(work / f"novel_lamps_{seed}.npz", held, self.novel, seed + 7000, 1)
+
+    def sources(self, args: argparse.Namespace) -> list[PairSource]:
+        """The pair pool's sources: the demo objects (``--demo-share`` of the pairs) and the catalogue."""
+        return [PairSource(self.demo, RobotCrops(self.demo_lit), args.demo_share),
+                PairSource(self.catalogue, RobotCrops(self.catalogue_lit), 1.0 - args.demo_share)]
+
+    def names(self) -> dict[str, list[str]]:
+        """The objects of each part of the data, as training.json records them."""
+        return {"demo": list(self.demo.names), "catalogue": list(self.catalogue.names),
+                "heldout": list(self.novel.names)}
 
 
 def fixed_pairs(views: RenderedViews, count: int, seed: int, model: DemoDiffusionModel,
@@ -174,21 +217,13 @@ def ema_predictor(model: DemoDiffusionModel, ema: EMAModel, config: DemoModelCon
 
 
 def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: torch.Tensor, pose: torch.Tensor,
-                  reference_view: torch.Tensor, t: torch.Tensor, view_weight: float
-                  ) -> tuple[torch.Tensor, torch.Tensor]:
-    """(total loss, denoising loss). Denoising: MSE of the UNet's output (noise or clean target, as the
-    config's ``prediction_type`` says) at the true pose. With absolute view conditioning, plus
-    ``view_weight`` x the MSE of the view head's (polar - pi/2, sin azimuth, cos azimuth) of the reference."""
+                  t: torch.Tensor) -> torch.Tensor:
+    """MSE of the UNet's output (noise or clean target, as the config's ``prediction_type`` says) at the true
+    relative pose."""
     noise = torch.randn_like(target)
     noisy = model.add_noise(target, noise, t)
     wanted = target if model.config.prediction_type == "sample" else noise
-    embedding = model.embed(reference)
-    denoising = (model.model_output(noisy, reference, embedding, pose, t) - wanted).pow(2).mean()
-    if model.view_head is None:
-        return denoising, denoising
-    polar, azimuth = reference_view[:, 0], reference_view[:, 1]
-    wanted_view = torch.stack([polar - math.pi / 2, torch.sin(azimuth), torch.cos(azimuth)], -1)
-    return denoising + view_weight * (model.view_head_output(embedding) - wanted_view).pow(2).mean(), denoising
+    return (model.model_output(noisy, reference, model.embed(reference), pose, t) - wanted).pow(2).mean()
 
 
 def robot_share_at(progress: float, args: argparse.Namespace) -> float:
@@ -203,26 +238,37 @@ def learning_rate_factor(progress: float) -> float:
     return min(1.0, max(progress, 1e-3) / WARM_UP) * (0.1 + 0.9 * cosine)
 
 
-class HeldOut:
-    """The held-out pairs the curve follows, per set (clean renders, robot crops): fixed pairs for the loss gap and
-    for the inversion check."""
+CURVE_SETS = ("novel", "novel_robot", "demo")
+"""The held-out sets the curve follows: clean pairs of held-out objects, the same objects as a robot's crops, and
+held-out cameras of the six demo objects."""
 
-    def __init__(self, args: argparse.Namespace, views: RenderedViews, crops: RobotCrops, model: DemoDiffusionModel):
-        self.views = views
-        self.gap = {"clean": fixed_pairs(views, args.gap_pairs, args.seed + 1, model),
-                    "robot": fixed_pairs(views, args.gap_pairs, args.seed + 4, model, crops)}
-        self.check = {"clean": fixed_pairs(views, args.check_pairs, args.seed + 2, model),
-                      "robot": fixed_pairs(views, args.check_pairs, args.seed + 5, model, crops)}
+
+class HeldOut:
+    """The held-out pairs the curve follows, per set of CURVE_SETS: fixed pairs for the loss gap and for the
+    inversion check."""
+
+    def __init__(self, args: argparse.Namespace, data: TrainingData, model: DemoDiffusionModel):
+        crops = RobotCrops(data.novel_lit)
+        self.views = {"novel": data.novel, "novel_robot": data.novel, "demo": data.demo_heldout}
+        self.gap = {"novel": fixed_pairs(data.novel, args.gap_pairs, args.seed + 1, model),
+                    "novel_robot": fixed_pairs(data.novel, args.gap_pairs, args.seed + 4, model, crops),
+                    "demo": fixed_pairs(data.demo_heldout, args.gap_pairs, args.seed + 6, model)}
+        self.check = {"novel": fixed_pairs(data.novel, args.check_pairs, args.seed + 2, model),
+                      "novel_robot": fixed_pairs(data.novel, args.check_pairs, args.seed + 5, model, crops),
+                      "demo": fixed_pairs(data.demo_heldout, args.check_pairs, args.seed + 7, model)}
         self.seed = args.seed + 3
 
     def gaps(self, predictor: DemoPredictor) -> dict[str, dict[int, float]]:
         return {name: loss_gaps(predictor, pairs, self.seed) for name, pairs in self.gap.items()}
 
     def checks(self, predictor: DemoPredictor, t: int) -> dict[str, dict[str, float]]:
-        return {name: inversion_check(predictor, pairs, self.views, t) for name, pairs in self.check.items()}
+        return {name: inversion_check(predictor, pairs, self.views[name], t) for name, pairs in self.check.items()}
 
-
-CURVE_SETS = ("clean", "robot")
+    def random_baseline(self, seed: int) -> str:
+        """RotAcc@15/30 of random poses on the novel check pairs."""
+        errors, _ = random_pose_errors(*map(spherical_to_c2w, true_cameras(self.check["novel"], self.views["novel"])),
+                                       200, np.random.default_rng(seed))
+        return f"RotAcc@15 {np.mean(errors < 15):.0%}, @30 {np.mean(errors < 30):.0%}"
 
 
 def curve_header() -> list[str]:
@@ -235,42 +281,51 @@ def describe(checks: dict[str, dict[str, float]]) -> str:
     return ", ".join(f"{name} RotAcc@15 {c['acc15']:.0%} @30 {c['acc30']:.0%}" for name, c in checks.items())
 
 
-def main() -> None:
-    args = parse_args()
-    torch.set_num_threads(args.threads)
-    torch.manual_seed(args.seed)
-    args.work_dir.mkdir(parents=True, exist_ok=True)
-    config = DemoModelConfig(block_out_channels=tuple(args.block_out_channels), layers_per_block=args.layers_per_block,
-                             resnet_time_scale_shift="scale_shift" if args.film else "default",
-                             token_in_timestep_embedding=args.token_in_timestep,
-                             prediction_type=args.prediction_type)
-    model = DemoDiffusionModel(config)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
-    ema = EMAModel(model.parameters(), decay=args.ema_decay)
-    checkpoint_path = args.work_dir / "checkpoint.pt"
-    step, elapsed, history = 0, 0.0, []
+def model_config(args: argparse.Namespace) -> DemoModelConfig:
+    """The architecture the arguments ask for: relative poses only (no absolute view head)."""
+    return DemoModelConfig(block_out_channels=tuple(args.block_out_channels), layers_per_block=args.layers_per_block,
+                           resnet_time_scale_shift="scale_shift" if args.film else "default",
+                           token_in_timestep_embedding=args.token_in_timestep, prediction_type=args.prediction_type,
+                           absolute_view_conditioning=False)
+
+
+def restore(args: argparse.Namespace, model: DemoDiffusionModel, optimizer: torch.optim.Optimizer, ema: EMAModel
+            ) -> tuple[int, float, list[dict]]:
+    """(step, training seconds, history) to go on from: the work dir's checkpoint (exactly), else ``--init-from``'s
+    model folder (its weights as model and EMA, a fresh optimizer), else a fresh start."""
+    checkpoint_path = args.work_dir / CHECKPOINT_FILE
     if checkpoint_path.is_file():
         state = torch.load(checkpoint_path, weights_only=True)
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
         ema.load_state_dict(state["ema"])
-        step, elapsed = int(state["step"]), float(state["elapsed"])
-        history = json.loads(state.get("history", "[]"))
-        print(f"resumed from {checkpoint_path} at step {step} ({elapsed / 60:.1f} min)")
+        print(f"resumed from {checkpoint_path} at step {state['step']} ({state['elapsed'] / 60:.1f} min)")
+        return int(state["step"]), float(state["elapsed"]), json.loads(state["history"])
+    if args.init_from is not None:
+        records = json.loads((args.init_from / "training.json").read_text())
+        model.load_state_dict(DemoDiffusionModel.from_pretrained(args.init_from).state_dict())
+        ema.load_state_dict({**ema.state_dict(), "shadow_params": [p.detach().clone() for p in model.parameters()]})
+        print(f"initialised from {args.init_from} at step {records['steps']} ({records['wall_minutes']:.1f} min)")
+        return int(records["steps"]), 60.0 * float(records["wall_minutes"]), records["phases"]
+    return 0, 0.0, []
 
+
+def main() -> None:
+    args = parse_args()
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(args.seed)
+    args.work_dir.mkdir(parents=True, exist_ok=True)
+    config = model_config(args)
+    model = DemoDiffusionModel(config)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
+    ema = EMAModel(model.parameters(), decay=args.ema_decay)
+    step, elapsed, history = restore(args, model, optimizer, ema)
     history.append({"from_step": step, "arguments": {k: str(v) if isinstance(v, Path) else v
                                                      for k, v in vars(args).items()}})
-    train, heldout = load_data(args)
-    specs = demo_objects()
-    lamps = f"{args.seed}_{args.lamps}.npz"
-    crops = RobotCrops(cached_lit(args.work_dir / f"lamps_{lamps}", specs, train, args.seed + 2000, args.lamps))
-    heldout_crops = RobotCrops(cached_lit(args.work_dir / f"heldout_lamps_{lamps}", specs, heldout, args.seed + 3000,
-                                          args.lamps))
-    held_out = HeldOut(args, heldout, heldout_crops, model)
-    baseline, _ = random_pose_errors(*map(spherical_to_c2w, true_cameras(held_out.check["clean"], heldout)), 200,
-                                     np.random.default_rng(args.seed))
-    print(f"random-pose baseline on the check pairs: RotAcc@15 {np.mean(baseline < 15):.0%}, "
-          f"@30 {np.mean(baseline < 30):.0%}")
+    data = TrainingData(args)
+    held_out = HeldOut(args, data, model)
+    print(f"{data.catalogue.num_objects} catalogue + {data.demo.num_objects} demo objects; random poses on the "
+          f"held-out check pairs: {held_out.random_baseline(args.seed)}")
     curve_path = args.work_dir / "curve.csv"
     new_curve = not curve_path.is_file()
     curve = curve_path.open("a", newline="")
@@ -279,25 +334,26 @@ def main() -> None:
         writer.writerow(curve_header())
 
     budget = args.minutes * 60.0
+    stop_at = min(budget, elapsed + args.chunk_minutes * 60.0)
     started = time.monotonic() - elapsed
     last_checkpoint = last_check = time.monotonic()
     gaps: dict[str, dict[int, float]] = {}
     losses: list[float] = []
     jitter = (1.5 - args.window_jitter, 1.5 + args.window_jitter)
-    pool = PairPool(train, model.downsample, args.pool, args.pool_refresh, jitter, crops,
+    pool = PairPool(data.sources(args), model.downsample, args.pool, args.pool_refresh, jitter,
                     robot_share_at(elapsed / budget, args))
     pool.fill(np.random.default_rng([args.seed, step, 1]), min(512, args.pool))
-    bar = tqdm(total=int(budget), initial=int(elapsed), unit="s", desc="train demo model")
+    bar = tqdm(total=int(stop_at), initial=int(elapsed), unit="s", desc="train model")
     model.train()
     while True:
         elapsed = time.monotonic() - started
-        if elapsed >= budget or (args.max_steps and step >= args.max_steps):
+        if elapsed >= stop_at or (args.max_steps and step >= args.max_steps):
             break
         rng = np.random.default_rng([args.seed, step])
         pool.robot_share = robot_share_at(elapsed / budget, args)
-        reference, target, pose, reference_view = pool.draw(rng, args.batch)
+        reference, target, pose = pool.draw(rng, args.batch)
         t = torch.as_tensor(rng.integers(args.t_min, args.t_max + 1, size=args.batch))
-        loss, denoising = training_loss(model, reference, target, pose, reference_view, t, args.view_weight)
+        loss = training_loss(model, reference, target, pose, t)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -306,7 +362,7 @@ def main() -> None:
         optimizer.step()
         ema.step(model.parameters())
         step += 1
-        losses.append(denoising.item())
+        losses.append(loss.item())
 
         row_check = [""] * (1 + 2 * len(CURVE_SETS))
         now = time.monotonic()
@@ -329,16 +385,18 @@ def main() -> None:
                         gap="/".join(f"{best.get(name, 0.0):+.0%}" for name in CURVE_SETS))
         bar.update(int(time.monotonic() - started) - bar.n)
         if time.monotonic() - last_checkpoint >= args.checkpoint_every_minutes * 60.0:
-            save_checkpoint(checkpoint_path, model, optimizer, ema, step, time.monotonic() - started, history)
+            save_checkpoint(args.work_dir / CHECKPOINT_FILE, model, optimizer, ema, step, time.monotonic() - started,
+                            history)
             last_checkpoint = time.monotonic()
     bar.close()
     elapsed = time.monotonic() - started
-    save_checkpoint(checkpoint_path, model, optimizer, ema, step, elapsed, history)
+    save_checkpoint(args.work_dir / CHECKPOINT_FILE, model, optimizer, ema, step, elapsed, history)
     predictor = ema_predictor(model, ema, config)
     gaps = held_out.gaps(predictor)
     best_t = probe_timestep(gaps, args)
     final = held_out.checks(predictor, best_t)
-    print(f"final: step {step}, {elapsed / 60:.1f} min, gaps {gaps}, check at t={best_t}: {describe(final)}")
+    print(f"step {step}, {elapsed / 60:.1f} of {args.minutes:.0f} min, gaps {gaps}, check at t={best_t}: "
+          f"{describe(final)}")
     predictor.model.save_pretrained(args.out)
     probe_t = best_t / config.num_train_timesteps
     (args.out / "solver_defaults.json").write_text(json.dumps(  # start_t_range: the annealed starts end at probe_t
@@ -351,15 +409,16 @@ def main() -> None:
         "phases": history,
         "config": asdict(config),
         "robot_crops": {"share": args.robot_share, "from": args.robot_from, "ramp": args.robot_ramp,
-                        "lamps_per_object": args.lamps, "other_lamp": crops.other_lamp,
-                        "reference": asdict(crops.reference), "target": asdict(crops.target)},
-        "data": {"objects": list(train.names), "train_views_per_object": train.views_per_object,
-                 "heldout_views_per_object": heldout.views_per_object, "image_size": args.image_size,
-                 "polar_deg": [30, 150], "fov_deg": 60},
-        "steps": step, "batch": args.batch, "wall_minutes": round(elapsed / 60, 1),
-        "threads": args.threads, "loss_gap_by_t": gaps, "final_check": {"t": best_t, **final,
-        "pairs": len(held_out.check["clean"].pose),
-        "grid": f"{CHECK_AZIMUTHS} azimuths x polar offsets {CHECK_POLARS_DEG}"},
+                        "lamps_per_demo_object": args.lamps, "lamps_per_catalogue_object": 1,
+                        "reference": asdict(RobotCrops.reference), "target": asdict(RobotCrops.target)},
+        "data": {"objects": data.names(), "demo_share": args.demo_share,
+                 "demo_views_per_object": data.demo.views_per_object,
+                 "catalogue_views_per_object": data.catalogue.views_per_object,
+                 "heldout_views_per_object": data.novel.views_per_object, "polar_deg": [30, 150], "fov_deg": 60},
+        "steps": step, "batch": args.batch, "wall_minutes": round(elapsed / 60, 1), "budget_minutes": args.minutes,
+        "finished": elapsed >= budget, "threads": args.threads, "loss_gap_by_t": gaps,
+        "final_check": {"t": best_t, **final, "pairs": len(held_out.check["novel"].pose),
+                        "grid": f"{CHECK_AZIMUTHS} azimuths x polar offsets {CHECK_POLARS_DEG}"},
     }, indent=2) + "\n")
     curve.close()
     plot_curve(curve_path, args.work_dir / "curve.png")
@@ -368,19 +427,19 @@ def main() -> None:
 
 def plot_curve(curve_path: Path, png_path: Path) -> None:
     """``curve.csv`` as a PNG: the loss gap at each probe timestep and the inversion checks vs minutes, per held-out
-    set (solid: clean renders, dashed: robot crops)."""
+    set (solid: novel objects, dashed: novel objects as a robot's crops, dotted: the demo objects)."""
     with curve_path.open() as handle:
         rows = list(csv.DictReader(handle))
     minutes = [float(row["minutes"]) for row in rows]
     figure, (gap_axes, check_axes) = plt.subplots(1, 2, figsize=(11, 4))
-    for name, style in zip(CURVE_SETS, ("-", "--")):
+    for name, style in zip(CURVE_SETS, ("-", "--", ":")):
         for index, t in enumerate(GAP_TIMESTEPS):
             gap_axes.plot(minutes, [100 * float(row[f"{name}_gap_t{t}"]) for row in rows], style, color=f"C{index}",
                           label=f"{name}, t = {t}")
     gap_axes.set(xlabel="training minutes", ylabel="loss gap, wrong vs true pose (%)", title="held-out pairs")
     gap_axes.legend(fontsize="small")
     checks = [row for row in rows if row["check_t"]]
-    for name, style in zip(CURVE_SETS, ("o-", "s--")):
+    for name, style in zip(CURVE_SETS, ("o-", "s--", "^:")):
         for index, accuracy in enumerate((15, 30)):
             check_axes.plot([float(row["minutes"]) for row in checks],
                             [100 * float(row[f"{name}_acc{accuracy}"]) for row in checks], style, color=f"C{index}",

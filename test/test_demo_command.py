@@ -20,7 +20,12 @@ def test_demo_evaluates_each_demo_object_with_the_embedded_model(tmp_path, monke
         report = json.loads((tmp_path / "demo_output" / name / "report.json").read_text())
         assert report["model"]["model_path"] == "" and report["aggregates"]["2"]["pairs"] == 1
         assert f"| {name} | 1 |" in summary
-    assert "| all | 6 |" in summary.split("On a tabletop")[0]
+    assert "| all | 6 |" in summary.split("never saw")[0]
+    novel = [bag.name for bag in demo.novel_demo_bags()]
+    assert novel == ["blob_880", "toy_heldout_0080"]
+    unseen = out.split("Objects the embedded model never saw")[1].split("On a tabletop")[0]
+    for name in novel:
+        assert f"| {name} | 1 |" in unseen
     assert [bag.name for bag in demo.robot_demo_bags()] == ["duck_tabletop"]
     robot = json.loads((tmp_path / "demo_output" / "duck_tabletop" / "report.json").read_text())
     assert robot["aggregates"]["2"]["pairs"] == 1

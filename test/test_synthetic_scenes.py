@@ -15,7 +15,6 @@ from idpose_core.synthetic.scenes import (
     random_camera_spheres,
     random_light,
     symmetric_objects,
-    unseen_objects,
 )
 
 SIZE = 64
@@ -23,13 +22,13 @@ POSES_DEG = [(0.0, 0.0), (30.0, 10.0), (90.0, 200.0), (150.0, 300.0), (180.0, 45
 
 
 def all_objects() -> list[ObjectSpec]:
-    return demo_objects() + oracle_objects() + unseen_objects() + symmetric_objects()
+    return demo_objects() + oracle_objects() + symmetric_objects()
 
 
 def test_object_sets_have_the_promised_sizes_and_distinct_names():
     names = [spec.name for spec in all_objects()]
     assert 4 <= len(demo_objects()) <= 8
-    assert len(oracle_objects()) >= 10 and len(unseen_objects()) >= 10
+    assert len(oracle_objects()) >= 10
     assert len(names) == len(set(names)), "object names must be unique across sets"
     assert all(spec.symmetric for spec in symmetric_objects())
     assert not any(spec.symmetric for spec in demo_objects() + oracle_objects())

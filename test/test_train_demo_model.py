@@ -1,6 +1,8 @@
 """scripts/train_demo_model.py end to end at toy size: renders, trains, resumes, writes the model folder."""
 from __future__ import annotations
 
+import argparse
+import importlib.util
 import json
 import subprocess
 import sys
@@ -10,11 +12,14 @@ import numpy as np
 import pytest
 
 from idpose_core.demo_model import DemoPredictor
+from idpose_core.synthetic.scenes import demo_objects
 
+pytestmark = pytest.mark.slow
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "train_demo_model.py"
 TOY = ["--threads", "1", "--train-views", "3", "--heldout-views", "3", "--image-size", "32", "--batch", "2",
        "--block-out-channels", "8", "16", "--pool", "8", "--pool-refresh", "1", "--gap-pairs", "2",
-       "--check-pairs", "2", "--gap-every", "2", "--minutes", "30"]
+       "--check-pairs", "2", "--gap-every", "2", "--minutes", "30", "--toys", "2", "--mesh-variants", "1",
+       "--blobs", "2", "--catalogue-views", "3", "--catalogue-size", "64", "--heldout-objects", "1", "--lamps", "1"]
 
 
 def train(work: Path, out: Path, steps: int, *extra: str) -> subprocess.CompletedProcess:
@@ -22,52 +27,71 @@ def train(work: Path, out: Path, steps: int, *extra: str) -> subprocess.Complete
                            "--max-steps", str(steps), *TOY, *extra], capture_output=True, text=True, timeout=600)
 
 
+def load_script():
+    spec = importlib.util.spec_from_file_location("train_demo_model", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_training_resumes_and_writes_a_loadable_model_with_its_records(tmp_path):
     work, out = tmp_path / "work", tmp_path / "model"
     first = train(work, out, 2)
     assert first.returncode == 0, first.stderr[-2000:]
-    assert (work / "checkpoint.pt").is_file() and (work / "train_0.npz").is_file()
+    assert (work / "checkpoint.pt").is_file() and (work / "catalogue_0.npz").is_file()
     second = train(work, out, 4)
     assert second.returncode == 0, second.stderr[-2000:]
     assert "resumed from" in second.stdout and "at step 2" in second.stdout
     training = json.loads((out / "training.json").read_text())
-    assert training["steps"] == 4 and training["seed"] == 0
+    assert training["steps"] == 4 and training["seed"] == 0 and not training["finished"]
     assert [phase["from_step"] for phase in training["phases"]] == [0, 2]
-    assert training["data"]["objects"] == ["duck", "teddy", "mug", "soccerball", "lego", "desk"]
+    objects = training["data"]["objects"]
+    assert objects["demo"] == [spec.name for spec in demo_objects()]
+    assert len(objects["catalogue"]) == 2 + 2 + 15 and objects["heldout"] == ["blob_800", "toy_heldout_0000"]
+    assert not set(objects["heldout"]) & set(objects["catalogue"])
     rows = (work / "curve.csv").read_text().splitlines()
-    assert rows[0].startswith("step,minutes,loss,clean_gap_t") and len(rows) == 3  # header + steps 2 and 4
+    assert rows[0].startswith("step,minutes,loss,novel_gap_t") and len(rows) == 3  # header + steps 2 and 4
     predictor = DemoPredictor.from_pretrained(out)
     assert predictor.model.config.block_out_channels == (8, 16)
+    assert predictor.model.view_head is None  # relative poses only: nothing object-specific
     assert 0.0 < predictor.solver_defaults["probe_t"] < 1.0
+
+
+def test_a_fresh_work_dir_goes_on_from_a_model_folder(tmp_path):
+    """Another machine, without the checkpoint: --init-from takes the weights, steps and minutes of the folder."""
+    first_out = tmp_path / "first"
+    assert train(tmp_path / "work_a", first_out, 2).returncode == 0
+    out = tmp_path / "second"
+    run = train(tmp_path / "work_b", out, 3, "--init-from", str(first_out))
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "initialised from" in run.stdout and "at step 2" in run.stdout
+    training = json.loads((out / "training.json").read_text())
+    assert training["steps"] == 3 and [phase["from_step"] for phase in training["phases"]] == [0, 2]
 
 
 def test_robot_crops_come_in_after_the_clean_start_and_are_recorded(tmp_path):
     """With no clean start the first steps already draw robot crops: lamps rendered per object, the share and the
-    augmentation recorded; the held-out curve follows clean pairs and robot crops."""
+    augmentation recorded; the held-out curve follows novel objects, their robot crops and the demo objects."""
     out = tmp_path / "model"
-    run = train(tmp_path / "work", out, 3, "--lamps", "1", "--robot-from", "0", "--robot-ramp", "0",
-                "--robot-share", "1")
+    run = train(tmp_path / "work", out, 3, "--robot-from", "0", "--robot-ramp", "0", "--robot-share", "1")
     assert run.returncode == 0, run.stderr[-2000:]
     lit = np.load(tmp_path / "work" / "lamps_0_1.npz")["rgb"]
     plain = np.load(tmp_path / "work" / "train_0.npz")["rgb"]
     assert lit.shape == (6, 3, 1, 32, 32, 3) and not np.array_equal(lit[:, :, 0], plain)  # other lights
+    catalogue_lit = np.load(tmp_path / "work" / "catalogue_lamps_0.npz")["rgb"]
+    assert catalogue_lit.shape == (19, 3, 1, 64, 64, 3)
     assert "robot=100%" in run.stderr
     training = json.loads((out / "training.json").read_text())
     crops = training["robot_crops"]
-    assert crops["share"] == 1 and crops["from"] == 0 and crops["lamps_per_object"] == 1
+    assert crops["share"] == 1 and crops["from"] == 0 and crops["lamps_per_demo_object"] == 1
     assert crops["reference"]["occluder"] > 0 == crops["target"]["occluder"]
     header = (tmp_path / "work" / "curve.csv").read_text().splitlines()[0].split(",")
-    assert "clean_gap_t400" in header and "robot_gap_t400" in header and "robot_acc30" in header
+    assert {"novel_gap_t400", "novel_robot_gap_t400", "demo_gap_t400", "novel_robot_acc30"} <= set(header)
 
 
 def test_the_robot_share_grows_after_the_clean_start():
     """0 during the clean start, then linear up to the chosen share, then held."""
-    import argparse
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("train_demo_model", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script()
     args = argparse.Namespace(robot_share=0.6, robot_from=0.2, robot_ramp=0.4)
     shares = [module.robot_share_at(progress, args) for progress in (0.0, 0.2, 0.4, 0.6, 0.9)]
     assert shares == pytest.approx([0.0, 0.0, 0.3, 0.6, 0.6])

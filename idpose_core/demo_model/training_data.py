@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,18 @@ class RenderedViews:
     @property
     def views_per_object(self) -> int:
         return int(self.rgb.shape[1])
+
+    @cached_property
+    def usable(self) -> np.ndarray:
+        """(O, V) bool: the views whose mask the pipeline accepts (``check_object_mask``); a thin object seen
+        end-on in a small render can fall under the pipeline's smallest object size."""
+        usable = np.ones(self.mask.shape[:2], bool)
+        for o, v in np.ndindex(*usable.shape):
+            try:
+                check_object_mask(self.mask[o, v], "render")
+            except PreprocessingError:
+                usable[o, v] = False
+        return usable
 
 
 def render_views(specs: Sequence[ObjectSpec], views_per_object: int, image_size: int, seed: int,
@@ -189,36 +202,62 @@ def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: 
 
 
 def random_pairs(views: RenderedViews, rng: np.random.Generator, count: int) -> tuple[np.ndarray, ...]:
-    """``count`` random (object, reference view, target view) index triples with distinct views."""
-    objects = rng.integers(0, views.num_objects, size=count)
-    reference = rng.integers(0, views.views_per_object, size=count)
-    offset = rng.integers(1, views.views_per_object, size=count)
-    return objects, reference, (reference + offset) % views.views_per_object
+    """``count`` random (object, reference view, target view) index triples with distinct usable views (objects
+    with fewer than two usable views are never drawn)."""
+    candidates = np.flatnonzero(views.usable.sum(1) >= 2)
+    if not len(candidates):
+        raise ValueError("no object has two views the pipeline accepts")
+    objects = rng.choice(candidates, size=count)
+    reference, target = np.empty(count, int), np.empty(count, int)
+    for k, o in enumerate(objects):
+        reference[k], target[k] = rng.choice(np.flatnonzero(views.usable[o]), size=2, replace=False)
+    return objects, reference, target
+
+
+@dataclass(frozen=True)
+class PairSource:
+    """Renders that training pairs are drawn from: ``views``, their robot-crop renders (``crops``, or None for
+    clean pairs only) and the source's ``weight`` among the pool's sources."""
+
+    views: RenderedViews
+    crops: RobotCrops | None = None
+    weight: float = 1.0
 
 
 class PairPool:
-    """A rolling pool of preprocessed training pairs: each draw adds ``refresh`` fresh pairs, each of them a
-    robot's crops (``crops``) with odds ``robot_share``, else the clean renders.
+    """A rolling pool of preprocessed training pairs: each draw adds ``refresh`` fresh pairs, each from one of the
+    ``sources`` (odds by weight) and each of them a robot's crops with odds ``robot_share`` (where the source has
+    crops), else the clean renders.
 
     Preprocessing a pair costs about as much as a tenth of a training step here, so pairs are
     reused a few times instead of being prepared anew for every batch.
     """
 
-    FIELDS = ("reference", "target", "pose", "reference_view")
+    FIELDS = ("reference", "target", "pose")
 
-    def __init__(self, views: RenderedViews, downsample: Callable[[torch.Tensor], torch.Tensor],
-                 capacity: int, refresh: int, window_scale_range: tuple[float, float], crops: RobotCrops | None = None,
-                 robot_share: float = 1.0):
-        self.views, self.downsample, self.crops, self.robot_share = views, downsample, crops, robot_share
+    def __init__(self, sources: Sequence[PairSource], downsample: Callable[[torch.Tensor], torch.Tensor],
+                 capacity: int, refresh: int, window_scale_range: tuple[float, float], robot_share: float = 1.0):
+        if not sources:
+            raise ValueError("a pair pool needs at least one source")
+        weights = np.array([source.weight for source in sources], dtype=np.float64)
+        if (weights < 0).any() or weights.sum() <= 0:
+            raise ValueError(f"source weights must be >= 0 with a positive sum, got {weights.tolist()}")
+        self.sources, self.odds = list(sources), weights / weights.sum()
+        self.downsample, self.robot_share = downsample, robot_share
         self.capacity, self.refresh, self.window_scale_range = capacity, refresh, window_scale_range
         self.tensors: dict[str, torch.Tensor] = {}
 
     def _fresh(self, rng: np.random.Generator, count: int) -> dict[str, torch.Tensor]:
-        scales = rng.uniform(*self.window_scale_range, size=count)
-        robot = rng.random(count) < self.robot_share
-        batch = make_pairs(self.views, *random_pairs(self.views, rng, count), self.downsample, scales, self.crops, rng,
-                           robot)
-        return {name: getattr(batch, name) for name in self.FIELDS}
+        counts = rng.multinomial(count, self.odds)
+        parts = []
+        for source, share in zip(self.sources, counts):
+            if not share:
+                continue
+            scales = rng.uniform(*self.window_scale_range, size=share)
+            robot = rng.random(share) < self.robot_share
+            parts.append(make_pairs(source.views, *random_pairs(source.views, rng, share), self.downsample, scales,
+                                    source.crops, rng, robot))
+        return {name: torch.cat([getattr(batch, name) for batch in parts]) for name in self.FIELDS}
 
     def fill(self, rng: np.random.Generator, count: int) -> None:
         """Start the pool with ``count`` pairs."""
@@ -226,7 +265,7 @@ class PairPool:
 
     def draw(self, rng: np.random.Generator, batch: int) -> tuple[torch.Tensor, ...]:
         """Add ``refresh`` fresh pairs (replacing random ones once full), then sample ``batch`` pairs:
-        (reference, target, pose, reference_view)."""
+        (reference, target, pose)."""
         if not self.tensors:
             raise RuntimeError("fill the pool before drawing from it")
         fresh = self._fresh(rng, self.refresh)

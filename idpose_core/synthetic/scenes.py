@@ -324,12 +324,6 @@ def oracle_objects(count: int = 12, seed: int = 0) -> list[ObjectSpec]:
     return [_blob(index, rng) for index in range(count)]
 
 
-def unseen_objects(count: int = 12, seed: int = 1) -> list[ObjectSpec]:
-    """Objects no model here is trained on, for evaluating learnt predictors: ``random_urdfs`` 500.. blobs."""
-    rng = np.random.default_rng(seed)
-    return [_blob(500 + index, rng) for index in range(count)]
-
-
 def symmetric_objects() -> list[ObjectSpec]:
     """Objects that look the same after a half turn (symmetry order 2): true pose ambiguity."""
     return [

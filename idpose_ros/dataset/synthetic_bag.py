@@ -25,6 +25,7 @@ from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 from tqdm import tqdm
 
+from idpose_core.synthetic.catalogue import HELDOUT_BLOBS, heldout_objects
 from idpose_core.synthetic.robot_views import LINK_FROM_OPTICAL, pinhole_intrinsics, robot_chain
 from idpose_core.synthetic.scenes import (
     FOV_DEG,
@@ -34,7 +35,6 @@ from idpose_core.synthetic.scenes import (
     random_camera_spheres,
     rolled_optical_frames,
     textured_objects,
-    unseen_objects,
 )
 from idpose_core.synthetic.tabletop import TabletopRenderer, random_layout, tabletop_cameras
 from idpose_core.transforms import split_transform
@@ -53,7 +53,9 @@ IMU_PERIOD_NS = 5_000_000  # 200 Hz
 IMU_NOISE = 0.05  # m/s^2, per axis and sample
 GRAVITY = 9.80665
 LINK_FROM_IMU = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, -0.01], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-OBJECT_SETS = {"demo": demo_objects, "unseen": unseen_objects, "textured": textured_objects}
+OBJECT_SETS = {"demo": demo_objects, "heldout": lambda: heldout_objects(0, len(HELDOUT_BLOBS)),
+               "textured": textured_objects}
+"""The object sets a bag can show; ``heldout``: the catalogue's held-out objects, which no training run saw."""
 SCENES = ("plain", "tabletop")
 LIGHTS = ("random", "training")
 TABLETOP_SIZE = 320  # px: the target covers about a sixth of the width

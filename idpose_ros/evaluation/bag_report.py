@@ -82,9 +82,12 @@ def intrinsics_note(evaluation: BagEvaluation) -> str:
 
 
 def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, float | int], dict[str, float | int]]:
-    """Over several evaluations: the model's summary of all their pairs, and the random-pose baseline's
-    RotAcc@15/30 and mean rotation error weighted by each evaluation's guesses."""
+    """Over several evaluations: the model's summary of all their pairs (with ``distinct_pairs``: the pairs of
+    different views, a pick repeated by the protocol counted once), and the random-pose baseline's RotAcc@15/30 and
+    mean rotation error weighted by each evaluation's guesses."""
     model = aggregate([pair for evaluation in evaluations for pair in evaluation.records])["all"]
+    model["distinct_pairs"] = sum(len({(pair["n"], pair["anchor_view"], pair["view"]) for pair in evaluation.records})
+                                  for evaluation in evaluations)
     rows = [evaluation.random_aggregates["all"] for evaluation in evaluations]
     guesses = sum(row["pairs"] for row in rows)
     random = {key: sum(row[key] * row["pairs"] for row in rows) / guesses

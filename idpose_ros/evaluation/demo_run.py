@@ -1,7 +1,8 @@
 """The demo: every shipped demo bag evaluated with one estimator, then one summary beside random poses.
 
 The bags (``data/demo_bags/<object>``: rendered views of one demo object on white with ground-truth
-/tf; ``data/demo_bags/robot/<name>``: a tabletop scene with aligned depth, intrinsics and an IMU, the
+/tf; ``data/demo_bags/novel/<object>``: the same for held-out objects, which the embedded model never saw;
+``data/demo_bags/robot/<name>``: a tabletop scene with aligned depth, intrinsics and an IMU, the
 robot's path) are found beside the source in a checkout, else in the package's share directory once
 installed.
 """
@@ -25,6 +26,7 @@ PACKAGE = "idpose_ros"
 BAGS_FOLDER = Path("data") / "demo_bags"
 SOURCE_BAGS = Path(__file__).resolve().parents[2] / BAGS_FOLDER  # in a checkout
 ROBOT_BAGS = "robot"  # the subfolder of the tabletop bags
+NOVEL_BAGS = "novel"  # the subfolder of the bags of objects the embedded model never saw
 DEMO_PROTOCOL = EvaluationProtocol(samples=1, seed=0, view_counts=(2,))
 # The tabletop bags' inputs as make_synthetic_bag --scene tabletop writes them: depth, intrinsics, gravity.
 ROBOT_INPUTS = GroundTruthOptions(extras=ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC,
@@ -54,6 +56,11 @@ def bags_in(folder: Path) -> list[Path]:
 def demo_bags() -> list[Path]:
     """The shipped bags on white, one per demo object, in name order."""
     return bags_in(demo_bag_folder())
+
+
+def novel_demo_bags() -> list[Path]:
+    """The shipped bags on white of held-out objects (no training run saw them), in name order."""
+    return bags_in(demo_bag_folder() / NOVEL_BAGS)
 
 
 def robot_demo_bags() -> list[Path]:
