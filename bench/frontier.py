@@ -2,15 +2,17 @@
 """The accuracy-cost frontier of the solver's schedules: one table, one row per schedule.
 
 Per row: predictor samples per estimate (the solver's counters on one render-oracle scene, no anchor
-polar angle known, so 5 polar candidates), seconds per estimate with the embedded demo model (on the
-demo bags), the projected full-size seconds (``bench/unit_costs.py``, float32 and bfloat16), and
-RotAcc@15/30 and the median rotation error on three sets: fresh demo-object bags (camera seed
-``--seed``), the render oracle (``bench/solver_oracle.py``'s scenes, its learning rates) and rolled
-bags (up to 45 deg) estimated with their Imu gravity; the bags are evaluated with ``evaluate_bag``.
+polar angle known, so 5 polar candidates), seconds per estimate with the embedded model (on the
+fresh bags), the projected full-size seconds (``bench/unit_costs.py``, float32 and bfloat16), and
+RotAcc@15/30 and the median rotation error on three sets: fresh bags (camera seed ``--seed``) of the
+held-out benchmark objects (``--object-set heldout``, the default: objects the embedded model never saw, where
+the presets face real ambiguity) or of the demo objects, the render oracle (``bench/solver_oracle.py``'s
+scenes, its learning rates) and rolled bags (up to 45 deg) estimated with their Imu gravity; the bags are
+evaluated with ``evaluate_bag``; pair counts are distinct pairs.
 ``--rows`` picks rows (``ROWS`` and the cost levers ``LEVERS``), ``--bag-rows`` those also run on the
 bags; prints the table, writes bench/results/frontier.json (or ``--out``).
 
-    python bench/frontier.py [--pairs 1] [--objects 6] [--oracle-objects 12] [--rows default fast ifusion]
+    python bench/frontier.py [--object-set heldout] [--objects 48] [--oracle-objects 12] [--rows default fast ifusion]
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ from idpose_core.evaluation.protocol import EvaluationProtocol  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.model_loading import load_predictor  # noqa: E402
 from idpose_core.solver import SolverConfig, estimate_poses  # noqa: E402
+from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOracle  # noqa: E402
 from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, oracle_objects  # noqa: E402
 from idpose_ros.dataset.synthetic_bag import IMU_TOPIC, SyntheticBagOptions, make_bag  # noqa: E402
@@ -69,37 +72,43 @@ WITH_GRAVITY = GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
 ROLL_DEG = 45.0
 
 
+OBJECT_SETS = {"heldout": lambda: heldout_objects(*BENCH_HELDOUT), "demo": demo_objects}
+
+
 def accuracy(records: list[dict]) -> dict[str, float]:
-    """RotAcc@15/30 and median rotation error of pair records, with the pair count."""
+    """RotAcc@15/30 and median rotation error of pair records, with the number of distinct pairs (``bag`` names the
+    bag of each record: the same views of two bags are two pairs)."""
     summary = aggregate(records)["all"]
-    return {key: summary[key] for key in ("pairs", "rot_acc_15", "rot_acc_30", "median_rot_err_deg")}
+    distinct = len({(r.get("bag"), r["n"], r["anchor_view"], r["view"]) for r in records})
+    return {"pairs": distinct, **{key: summary[key] for key in ("rot_acc_15", "rot_acc_30", "median_rot_err_deg")}}
 
 
 def bag_sets(rows: dict, args: argparse.Namespace, work: Path) -> dict[str, dict]:
-    """Per row: its records on the demo bags and the rolled bags with gravity, the cost of its demo-bag estimates."""
+    """Per row: its records on the fresh bags and the rolled bags with gravity, the cost of its fresh-bag estimates."""
     predictor = load_predictor("", "cpu", "float32")
     out = {}
     bags = {}
-    for spec in demo_objects()[: args.objects]:
-        bags[("demo", spec.name)] = make_bag(work / f"demo_{spec.name}", SyntheticBagOptions(
-            object_name=spec.name, views=args.views, seed=args.seed))
+    for spec in OBJECT_SETS[args.object_set]()[: args.objects]:
+        bags[("fresh", spec.name)] = make_bag(work / f"fresh_{spec.name}", SyntheticBagOptions(
+            object_set=args.object_set, object_name=spec.name, views=args.views, seed=args.seed))
         bags[("rolled", spec.name)] = make_bag(work / f"rolled_{spec.name}", SyntheticBagOptions(
-            object_name=spec.name, views=args.views, seed=args.seed + 1, roll_deg=ROLL_DEG))
+            object_set=args.object_set, object_name=spec.name, views=args.views, seed=args.seed + 1,
+            roll_deg=ROLL_DEG))
     for row, (count, preset, overrides) in rows.items():
         estimator = OfflineEstimator(predictor, EstimatorOptions(preset=preset).node_values(),
                                      preset=preset, solver_overrides=overrides)
         protocol = EvaluationProtocol(args.pairs, args.seed, (count,))
-        records: dict[str, list] = {"demo": [], "rolled": []}
+        records: dict[str, list] = {"fresh": [], "rolled": []}
         estimates = []
         started = time.monotonic()
-        for (kind, _), bag in bags.items():
+        for (kind, name), bag in bags.items():
             evaluation = evaluate_bag(bag, estimator, WITH_GRAVITY if kind == "rolled" else None, protocol,
                                       show_progress=False)
-            records[kind].extend(evaluation.records)
-            if kind == "demo":
+            records[kind].extend({**record, "bag": name} for record in evaluation.records)
+            if kind == "fresh":
                 estimates.extend(evaluation.estimates)
         details = [estimate["details"] for estimate in estimates]
-        out[row] = {"demo": accuracy(records["demo"]), "rolled": accuracy(records["rolled"]),
+        out[row] = {"fresh": accuracy(records["fresh"]), "rolled": accuracy(records["rolled"]),
                     "bag_forward_samples": float(np.mean([d["forward_samples"] for d in details])),
                     "bag_backward_samples": float(np.mean([d["backward_samples"] for d in details])),
                     "seconds": float(np.mean([estimate["seconds"] for estimate in estimates]))}
@@ -136,8 +145,9 @@ def projected(row: dict, views: int) -> dict[str, float]:
 
 def table(result: dict) -> str:
     """The frontier as one Markdown table."""
-    lines = ["| schedule | n | samples (differentiated) | demo model s | full-size s float32 | full-size s bfloat16 "
-             "| demo bags @15 / @30 / median | oracle @15 / @30 / median | rolled + gravity @15 / @30 / median |",
+    lines = ["| schedule | n | samples (differentiated) | embedded model s | full-size s float32 "
+             "| full-size s bfloat16 | fresh bags @15 / @30 / median | oracle @15 / @30 / median "
+             "| rolled + gravity @15 / @30 / median |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
 
     def cell(acc: dict | None) -> str:
@@ -149,7 +159,7 @@ def table(result: dict) -> str:
         seconds = f"{row['seconds']:.0f}" if "seconds" in row else "not run"
         lines.append(f"| {name} | {row['n']} | {row['forward_samples']} ({row['backward_samples']}) | "
                      f"{seconds} | {row['projected']['float32']:.0f} | {row['projected']['bfloat16']:.0f} | "
-                     f"{cell(row.get('demo'))} | {cell(row['oracle'])} | {cell(row.get('rolled'))} |")
+                     f"{cell(row.get('fresh'))} | {cell(row['oracle'])} | {cell(row.get('rolled'))} |")
     return "\n".join(lines)
 
 
@@ -158,7 +168,9 @@ def main() -> None:
     parser.add_argument("--rows", nargs="+", default=list(ROWS), choices=[*ROWS, *LEVERS])
     parser.add_argument("--bag-rows", nargs="*", help="rows also run on the bags (default: all of --rows)")
     parser.add_argument("--pairs", type=int, default=1, help="evaluate_bag picks per bag")
-    parser.add_argument("--objects", type=int, default=6, help="demo objects (one fresh and one rolled bag each)")
+    parser.add_argument("--object-set", choices=tuple(OBJECT_SETS), default="heldout",
+                        help="the objects of the fresh and rolled bags")
+    parser.add_argument("--objects", type=int, default=48, help="objects (one fresh and one rolled bag each)")
     parser.add_argument("--views", type=int, default=8, help="views per bag")
     parser.add_argument("--oracle-objects", type=int, default=12, help="render-oracle objects (one scene each)")
     parser.add_argument("--seed", type=int, default=4242, help="camera and pick seed of the fresh bags")

@@ -122,6 +122,8 @@ def parse_args() -> argparse.Namespace:
                         help="timestep+pose embedding scales and shifts every ResNet block (FiLM)")
     parser.add_argument("--token-in-timestep", action=argparse.BooleanOptionalAction, default=True,
                         help="the cc_projection token (reference embedding + pose) also enters the timestep embedding")
+    parser.add_argument("--reference-warp", action=argparse.BooleanOptionalAction, default=True,
+                        help="the UNet also sees the reference warped into the target view through a sphere")
     args = parser.parse_args()
     args.out = args.out or args.work_dir / "model"
     return args
@@ -286,7 +288,7 @@ def model_config(args: argparse.Namespace) -> DemoModelConfig:
     return DemoModelConfig(block_out_channels=tuple(args.block_out_channels), layers_per_block=args.layers_per_block,
                            resnet_time_scale_shift="scale_shift" if args.film else "default",
                            token_in_timestep_embedding=args.token_in_timestep, prediction_type=args.prediction_type,
-                           absolute_view_conditioning=False)
+                           absolute_view_conditioning=False, reference_warp=args.reference_warp)
 
 
 def restore(args: argparse.Namespace, model: DemoDiffusionModel, optimizer: torch.optim.Optimizer, ema: EMAModel

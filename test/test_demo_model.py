@@ -118,3 +118,22 @@ def test_view_head_reads_the_absolute_reference_view():
     assert without.view_head is None
     with pytest.raises(ValueError, match="no view head"):
         without.reference_view(torch.randn(1, TINY.embedding_dim))
+
+
+def test_the_reference_warp_enters_the_unet_and_carries_the_pose_gradient(monkeypatch):
+    """With ``reference_warp`` the UNet takes 10 channels: the noisy target, the reference, and the reference warped
+    by the pose with its visibility; a pose change then reaches the UNet's input itself."""
+    config = replace(TINY, reference_warp=True, absolute_view_conditioning=False)
+    model = DemoDiffusionModel(config)
+    assert model.unet.config.in_channels == 10
+    seen = []
+    forward = model.unet.forward
+    monkeypatch.setattr(model.unet, "forward", lambda sample, *args, **kwargs: seen.append(sample) or
+                        forward(sample, *args, **kwargs))
+    reference, noisy = images(1, size=16, seed=1), images(1, size=16, seed=2)
+    for azimuth in (0.0, 1.0):
+        model.model_output(noisy, reference, torch.zeros(1, 16), torch.tensor([[0.0, azimuth, 0.0]]),
+                           torch.tensor([500]))
+    assert torch.equal(seen[0][:, :6], seen[1][:, :6]) and not torch.equal(seen[0][:, 6:], seen[1][:, 6:])
+    with pytest.raises(ValueError, match="warp_radius"):
+        replace(config, warp_radius=1.5).validate()

@@ -8,6 +8,7 @@ from pathlib import Path
 from transformers import CLIPVisionConfig
 
 from idpose_core.demo_model.pose_features import FOURIER_DIM
+from idpose_core.demo_model.reference_warp import WARP_CHANNELS
 
 ZERO123_POSE_DIM = 4
 
@@ -45,6 +46,8 @@ class DemoModelConfig:
     beta_schedule: str = "scaled_linear"
     prediction_type: str = "sample"
     absolute_view_conditioning: bool = True
+    reference_warp: bool = False
+    warp_radius: float = 0.6
 
     def validate(self) -> DemoModelConfig:
         """Raise ValueError naming the first inconsistent field; return self."""
@@ -59,6 +62,8 @@ class DemoModelConfig:
                              f"got {self.resnet_time_scale_shift!r}")
         if self.embedding_dim % self.encoder_heads:
             raise ValueError(f"encoder_heads {self.encoder_heads} must divide embedding_dim {self.embedding_dim}")
+        if not 0.0 < self.warp_radius <= 1.0:
+            raise ValueError(f"warp_radius must be in (0, 1], got {self.warp_radius}")
         if self.prediction_type not in ("epsilon", "sample"):
             raise ValueError(f"prediction_type must be 'epsilon' or 'sample', got {self.prediction_type!r}")
         return self
@@ -68,7 +73,7 @@ class DemoModelConfig:
         levels = len(self.block_out_channels)
         return dict(
             sample_size=self.resolution,
-            in_channels=6,
+            in_channels=6 + (WARP_CHANNELS if self.reference_warp else 0),
             out_channels=3,
             block_out_channels=tuple(self.block_out_channels),
             layers_per_block=self.layers_per_block,

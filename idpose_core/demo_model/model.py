@@ -6,7 +6,8 @@ embedding + 4 -> embedding) producing the single cross-attention token. Deviatio
 Fourier features (optionally with the cc_projection token) also enter the timestep embedding through
 the UNet's projection class embedding, and optionally scale and shift every ResNet block (FiLM);
 with ``absolute_view_conditioning`` those features describe the absolute target view, the relative
-pose composed onto the reference view that ``view_head`` reads from the reference embedding.
+pose composed onto the reference view that ``view_head`` reads from the reference embedding; with
+``reference_warp`` the UNet also sees the reference warped into the target view through a sphere.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from transformers import CLIPVisionModelWithProjection
 
 from idpose_core.demo_model.config import ZERO123_POSE_DIM, DemoModelConfig
 from idpose_core.demo_model.pose_features import fourier_pose_features
+from idpose_core.demo_model.reference_warp import sphere_warp
 from idpose_core.spherical import compose
 from idpose_core.zero123.zero123_predictor import pose_features
 
@@ -77,15 +79,18 @@ class DemoDiffusionModel(nn.Module):
         The pose path (view head, composition, features, cc_projection) runs in float32 even under a
         reduced-precision autocast: bfloat16 there flipped answers that float32 got right.
         """
+        inputs = [noisy, reference]
         with torch.autocast(noisy.device.type, enabled=False):
             embedding = embedding.float()
             token = self.cc_projection(torch.cat([embedding, pose_features(pose).to(embedding.dtype)], -1))
+            if self.config.reference_warp:
+                inputs.append(sphere_warp(reference.float(), pose, self.config.warp_radius).to(noisy.dtype))
             if self.view_head is not None:
                 pose = compose(self.reference_view(embedding), pose)
             class_input = fourier_pose_features(pose).to(embedding.dtype)
             if self.config.token_in_timestep_embedding:
                 class_input = torch.cat([class_input, token], -1)
-        return self.unet(torch.cat([noisy, reference], 1), t, encoder_hidden_states=token[:, None],
+        return self.unet(torch.cat(inputs, 1), t, encoder_hidden_states=token[:, None],
                          class_labels=class_input).sample
 
     def view_head_output(self, embedding: torch.Tensor) -> torch.Tensor:
