@@ -2,13 +2,13 @@
 """Accuracy of the embedded demo model, measured with ``evaluate_bag`` on bags no training run saw.
 
 Renders fresh bags with ``make_synthetic_bag`` (camera seed ``--seed``; training used its own
-random cameras): one per demo object (held-out views of the training objects) and one per unseen
-object (``random_urdfs`` blobs the model never saw). Runs ``evaluate_bag`` offline on each
-(``--n 2``, ``--samples`` picks, the solver preset and model precision given), and sums the pairs up
-per set beside the random-pose baseline that ``evaluate_bag`` scores on the same pairs. Prints the
+random cameras): one per demo object (held-out views of the training objects) and one per held-out
+object (the first of the catalogue's benchmark objects, ``random_urdfs`` blobs the model never saw). Runs
+``evaluate_bag`` offline on each (``--n 2``, ``--samples`` picks, the solver preset and model precision given),
+and sums the pairs up per set beside the random-pose baseline that ``evaluate_bag`` scores on the same pairs. Prints the
 table and writes bench/results/demo_model_accuracy.json (``_<precision>`` before ``.json`` unless float32).
 
-    python bench/demo_model_accuracy.py [--samples 4] [--unseen 6] [--preset default] [--precision bfloat16]
+    python bench/demo_model_accuracy.py [--samples 4] [--heldout 6] [--preset default] [--precision bfloat16]
 """
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ import torch  # noqa: E402 (after the path setup)
 
 from idpose_core.evaluation.estimator import ViewSetEstimator
 from idpose_core.evaluation.protocol import EvaluationProtocol
-from idpose_core.synthetic.scenes import demo_objects, unseen_objects  # noqa: E402
+from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
+from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
 from idpose_ros.dataset.synthetic_bag import SyntheticBagOptions, make_bag
 from idpose_ros.evaluation.bag_evaluation import evaluate_bag
 from idpose_ros.evaluation.bag_report import pooled_summaries, write_report  # noqa: E402
@@ -53,7 +54,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", type=int, default=4, help="evaluate_bag picks per bag (one n = 2 pair each)")
     parser.add_argument("--views", type=int, default=12, help="views per bag")
-    parser.add_argument("--unseen", type=int, default=6, help="unseen objects")
+    parser.add_argument("--heldout", type=int, default=6, help="held-out objects")
     parser.add_argument("--preset", choices=("default", "fast"), default="default")
     parser.add_argument("--seed", type=int, default=101, help="camera and pick seed of the fresh bags")
     parser.add_argument("--precision", choices=("float32", "bfloat16"), default="float32")
@@ -66,10 +67,11 @@ def main() -> None:
     started = time.monotonic()
     estimator = make_estimator(EstimatorOptions(preset=args.preset, precision=args.precision))
     with tempfile.TemporaryDirectory(prefix="idpose_demo_accuracy_") as folder:
+        heldout_names = [spec.name for spec in heldout_objects(*BENCH_HELDOUT)]
         sets = {"demo objects, held-out views": evaluate_set("demo", [s.name for s in demo_objects()], estimator,
                                                             args, Path(folder)),
-                "unseen objects": evaluate_set("unseen", [s.name for s in unseen_objects(args.unseen)], estimator,
-                                               args, Path(folder))}
+                "held-out objects": evaluate_set("heldout", heldout_names[:args.heldout], estimator, args,
+                                                 Path(folder))}
     result = {"arguments": {k: str(v) for k, v in vars(args).items()}, "minutes": (time.monotonic() - started) / 60,
               "sets": sets}
     print("\n| set | pairs | RotAcc@15° | RotAcc@30° | mean rot. err. (°) | random RotAcc@15° | random RotAcc@30° "
