@@ -65,6 +65,7 @@ CHECK_AZIMUTHS = 12
 CHECK_POLARS_DEG = (-45.0, 0.0, 45.0)
 WARM_UP = 0.02  # of the wall-time budget
 CHECKPOINT_FILE = "checkpoint.pt"
+WRONG_POLAR = 0.4  # radians: how far a wrong pose of the ranking loss moves the polar angle
 
 
 def parse_args() -> argparse.Namespace:
@@ -122,6 +123,10 @@ def parse_args() -> argparse.Namespace:
                         help="timestep+pose embedding scales and shifts every ResNet block (FiLM)")
     parser.add_argument("--token-in-timestep", action=argparse.BooleanOptionalAction, default=True,
                         help="the cc_projection token (reference embedding + pose) also enters the timestep embedding")
+    parser.add_argument("--rank-weight", type=float, default=0.05,
+                        help="weight of the ranking loss: a wrong pose's error must exceed the true pose's (0: off)")
+    parser.add_argument("--rank-margin", type=float, default=0.2,
+                        help="the ranking loss's margin, as a share of the two errors' sum")
     parser.add_argument("--reference-warp", action=argparse.BooleanOptionalAction, default=True,
                         help="the UNet also sees the reference warped into the target view through a sphere")
     args = parser.parse_args()
@@ -218,14 +223,35 @@ def ema_predictor(model: DemoDiffusionModel, ema: EMAModel, config: DemoModelCon
     return DemoPredictor(copy)
 
 
+def wrong_poses(pose: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
+    """For relative poses (B, 3), wrong ones (B, 3): the azimuth turned by 30..330 deg, the polar moved by up to
+    WRONG_POLAR radians."""
+    count = len(pose)
+    turn = torch.as_tensor(rng.uniform(math.pi / 6, 11 * math.pi / 6, count), dtype=pose.dtype)
+    tilt = torch.as_tensor(rng.uniform(-WRONG_POLAR, WRONG_POLAR, count), dtype=pose.dtype)
+    return torch.stack([pose[:, 0] + tilt, torch.remainder(pose[:, 1] + turn, 2 * math.pi), pose[:, 2]], -1)
+
+
 def training_loss(model: DemoDiffusionModel, reference: torch.Tensor, target: torch.Tensor, pose: torch.Tensor,
-                  t: torch.Tensor) -> torch.Tensor:
-    """MSE of the UNet's output (noise or clean target, as the config's ``prediction_type`` says) at the true
-    relative pose."""
+                  wrong: torch.Tensor, t: torch.Tensor, rank_weight: float, rank_margin: float
+                  ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(total loss, denoising loss). Denoising: MSE of the UNet's output (noise or clean target, as the config's
+    ``prediction_type`` says) at the true relative pose. Ranking: the same error under a ``wrong`` pose (same noise,
+    same step) must exceed the true pose's by ``rank_margin`` of their sum (a hinge, weighted by ``rank_weight``):
+    what the solver's inversion needs, the true pose's error the lowest."""
     noise = torch.randn_like(target)
     noisy = model.add_noise(target, noise, t)
     wanted = target if model.config.prediction_type == "sample" else noise
-    return (model.model_output(noisy, reference, model.embed(reference), pose, t) - wanted).pow(2).mean()
+    embedding = model.embed(reference)
+    if rank_weight == 0:
+        denoising = (model.model_output(noisy, reference, embedding, pose, t) - wanted).pow(2).mean()
+        return denoising, denoising
+    output = model.model_output(noisy.repeat(2, 1, 1, 1), reference.repeat(2, 1, 1, 1), embedding.repeat(2, 1),
+                                torch.cat([pose, wrong]), t.repeat(2))
+    true_error, wrong_error = (output - wanted.repeat(2, 1, 1, 1)).pow(2).flatten(1).mean(1).chunk(2)
+    gap = (wrong_error - true_error) / (wrong_error + true_error).detach()
+    denoising = true_error.mean()
+    return denoising + rank_weight * torch.relu(rank_margin - gap).mean(), denoising
 
 
 def robot_share_at(progress: float, args: argparse.Namespace) -> float:
@@ -355,7 +381,8 @@ def main() -> None:
         pool.robot_share = robot_share_at(elapsed / budget, args)
         reference, target, pose = pool.draw(rng, args.batch)
         t = torch.as_tensor(rng.integers(args.t_min, args.t_max + 1, size=args.batch))
-        loss = training_loss(model, reference, target, pose, t)
+        loss, denoising = training_loss(model, reference, target, pose, wrong_poses(pose, rng), t, args.rank_weight,
+                                        args.rank_margin)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -364,7 +391,7 @@ def main() -> None:
         optimizer.step()
         ema.step(model.parameters())
         step += 1
-        losses.append(loss.item())
+        losses.append(denoising.item())
 
         row_check = [""] * (1 + 2 * len(CURVE_SETS))
         now = time.monotonic()

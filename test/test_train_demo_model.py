@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
-from idpose_core.demo_model import DemoPredictor
+from idpose_core.demo_model import DemoDiffusionModel, DemoModelConfig, DemoPredictor
 from idpose_core.synthetic.scenes import demo_objects
 
-pytestmark = pytest.mark.slow
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "train_demo_model.py"
 TOY = ["--threads", "1", "--train-views", "3", "--heldout-views", "3", "--image-size", "32", "--batch", "2",
        "--block-out-channels", "8", "16", "--pool", "8", "--pool-refresh", "1", "--gap-pairs", "2",
@@ -34,6 +34,7 @@ def load_script():
     return module
 
 
+@pytest.mark.slow
 def test_training_resumes_and_writes_a_loadable_model_with_its_records(tmp_path):
     work, out = tmp_path / "work", tmp_path / "model"
     first = train(work, out, 2)
@@ -57,6 +58,7 @@ def test_training_resumes_and_writes_a_loadable_model_with_its_records(tmp_path)
     assert 0.0 < predictor.solver_defaults["probe_t"] < 1.0
 
 
+@pytest.mark.slow
 def test_a_fresh_work_dir_goes_on_from_a_model_folder(tmp_path):
     """Another machine, without the checkpoint: --init-from takes the weights, steps and minutes of the folder."""
     first_out = tmp_path / "first"
@@ -69,6 +71,7 @@ def test_a_fresh_work_dir_goes_on_from_a_model_folder(tmp_path):
     assert training["steps"] == 3 and [phase["from_step"] for phase in training["phases"]] == [0, 2]
 
 
+@pytest.mark.slow
 def test_robot_crops_come_in_after_the_clean_start_and_are_recorded(tmp_path):
     """With no clean start the first steps already draw robot crops: lamps rendered per object, the share and the
     augmentation recorded; the held-out curve follows novel objects, their robot crops and the demo objects."""
@@ -95,3 +98,33 @@ def test_the_robot_share_grows_after_the_clean_start():
     args = argparse.Namespace(robot_share=0.6, robot_from=0.2, robot_ramp=0.4)
     shares = [module.robot_share_at(progress, args) for progress in (0.0, 0.2, 0.4, 0.6, 0.9)]
     assert shares == pytest.approx([0.0, 0.0, 0.3, 0.6, 0.6])
+
+
+def test_wrong_poses_turn_the_azimuth_at_least_30_degrees():
+    module = load_script()
+    pose = torch.tensor([[0.2, 6.0, 0.0]]).repeat(500, 1)
+    wrong = module.wrong_poses(pose, np.random.default_rng(0))
+    turn = torch.remainder(wrong[:, 1] - pose[:, 1], 2 * np.pi)
+    assert float(turn.min()) >= np.pi / 6 - 1e-5 and float(turn.max()) <= 11 * np.pi / 6 + 1e-5
+    assert float((wrong[:, 0] - pose[:, 0]).abs().max()) <= module.WRONG_POLAR + 1e-6
+    assert torch.equal(wrong[:, 2], pose[:, 2])
+
+
+def test_the_ranking_loss_adds_a_hinge_on_the_wrong_pose_error():
+    """With weight 0 the loss is the denoising MSE alone; with a weight it adds a non-negative hinge, and the
+    gradient reaches the model through the wrong pose's prediction too."""
+    module = load_script()
+    torch.manual_seed(0)
+    model = DemoDiffusionModel(DemoModelConfig(resolution=16, block_out_channels=(8, 16), norm_num_groups=4,
+                                               embedding_dim=16, encoder_layers=1, encoder_heads=2,
+                                               absolute_view_conditioning=False, reference_warp=True))
+    reference, target = torch.rand(2, 3, 16, 16) * 2 - 1, torch.rand(2, 3, 16, 16) * 2 - 1
+    pose = torch.tensor([[0.0, 0.5, 0.0], [0.1, 2.0, 0.0]])
+    t = torch.tensor([500, 800])
+    torch.manual_seed(1)
+    plain, denoising = module.training_loss(model, reference, target, pose, pose, t, 0.0, 0.2)
+    assert torch.equal(plain, denoising)
+    torch.manual_seed(1)
+    ranked, same = module.training_loss(model, reference, target, pose, pose, t, 1.0, 0.2)
+    torch.testing.assert_close(same, denoising)
+    torch.testing.assert_close(ranked - same, torch.tensor(0.2))  # the wrong pose is the true one: no gap at all
