@@ -51,7 +51,8 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
         return DemoPredictor.from_pretrained(folder, device, dtype)
     path = Path(model_path).expanduser()
     if (path / WEIGHTS_FILE).is_file() and (path / "config.json").is_file():
-        logging.getLogger(__name__).warning("model_path %s is a demo model: it only knows the demo objects", path)
+        logging.getLogger(__name__).warning("model_path %s is a small model of scripts/train_demo_model.py, "
+                                            "trained on synthetic objects only (docs/demo_model.md)", path)
         return DemoPredictor.from_pretrained(path, device, dtype)
     if path.is_dir():
         return Zero123Predictor.from_pretrained(path, device=device, dtype=PRECISIONS[precision])

@@ -34,7 +34,7 @@ def test_a_demo_model_folder_as_model_path_loads_that_model(tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         predictor = load_predictor(str(tmp_path / "trained"), device="cpu")
     assert isinstance(predictor, DemoPredictor) and predictor.model.config == TINY
-    assert "demo model" in caplog.text
+    assert "trained on synthetic objects only" in caplog.text
     (tmp_path / "trained" / "config.json").unlink()  # no longer a demo model folder: read as Zero-1-to-3's
     with pytest.raises(ModelLoadError, match="not a Zero-1-to-3 diffusers folder"):
         load_predictor(str(tmp_path / "trained"), device="cpu")
