@@ -88,11 +88,11 @@ def bag_sets(rows: dict, args: argparse.Namespace, work: Path) -> dict[str, dict
     predictor = load_predictor("", "cpu", "float32")
     out = {}
     bags = {}
-    for spec in OBJECT_SETS[args.object_set]()[: args.objects]:
+    for index, spec in enumerate(OBJECT_SETS[args.object_set]()[: args.objects]):  # each bag its own cameras
         bags[("fresh", spec.name)] = make_bag(work / f"fresh_{spec.name}", SyntheticBagOptions(
-            object_set=args.object_set, object_name=spec.name, views=args.views, seed=args.seed))
+            object_set=args.object_set, object_name=spec.name, views=args.views, seed=args.seed + 2 * index))
         bags[("rolled", spec.name)] = make_bag(work / f"rolled_{spec.name}", SyntheticBagOptions(
-            object_set=args.object_set, object_name=spec.name, views=args.views, seed=args.seed + 1,
+            object_set=args.object_set, object_name=spec.name, views=args.views, seed=args.seed + 2 * index + 1,
             roll_deg=ROLL_DEG))
     for row, (count, preset, overrides) in rows.items():
         estimator = OfflineEstimator(predictor, EstimatorOptions(preset=preset).node_values(),

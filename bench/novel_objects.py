@@ -59,14 +59,16 @@ OBJECTS = {"heldout": lambda: heldout_objects(*BENCH_HELDOUT), "demo": demo_obje
 
 
 def make_bags(work: Path, args: argparse.Namespace) -> dict[tuple[str, str], list[Path]]:
-    """One bag per object for each (object set, scene) the sets use; white bags are shared by both gravity rows."""
+    """One bag per object for each (object set, scene) the sets use, each bag its own cameras (seed ``--seed`` plus
+    the object's index: one seed for all would give every object the same relative poses); white bags are shared by
+    both gravity rows."""
     bags: dict[tuple[str, str], list[Path]] = {}
     for object_set, scene, _, _ in SETS.values():
         key = (object_set, scene["scene"])
         if key not in bags:
             bags[key] = [make_bag(work / f"{object_set}_{scene['scene']}_{spec.name}", SyntheticBagOptions(
-                object_set=object_set, object_name=spec.name, views=args.views, seed=args.seed, **scene))
-                for spec in OBJECTS[object_set]()]
+                object_set=object_set, object_name=spec.name, views=args.views, seed=args.seed + index, **scene))
+                for index, spec in enumerate(OBJECTS[object_set]())]
     return bags
 
 
@@ -111,8 +113,9 @@ def main() -> None:
     models = dict(item.split("=", 1) for item in args.model or ["embedded="])
     torch.set_num_threads(args.threads)
     started = time.monotonic()
-    bags_key = {"seed": args.seed, "views": args.views, "preset": args.preset, "heldout": list(BENCH_HELDOUT),
-                "heldout_samples": args.heldout_samples, "demo_samples": args.demo_samples}
+    bags_key = {"seed": args.seed, "seed_per_bag": True, "views": args.views, "preset": args.preset,
+                "heldout": list(BENCH_HELDOUT), "heldout_samples": args.heldout_samples,
+                "demo_samples": args.demo_samples}
     previous = json.loads(args.out.read_text()) if args.out.is_file() else {}
     results = previous.get("results", {}) if previous.get("bags") == bags_key else {}
     with tempfile.TemporaryDirectory(prefix="idpose_novel_objects_") as folder:
