@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import torch  # noqa: E402 (after the path setup)
 
-from idpose_core.evaluation.estimator import ViewSetEstimator  # noqa: E402
+from bench.robot_crops import evaluate_set  # noqa: E402
 from idpose_core.evaluation.protocol import EvaluationProtocol  # noqa: E402
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
@@ -38,8 +38,6 @@ from idpose_ros.dataset.synthetic_bag import (  # noqa: E402
     SyntheticBagOptions,
     make_bag,
 )
-from idpose_ros.evaluation.bag_evaluation import evaluate_bag  # noqa: E402
-from idpose_ros.evaluation.bag_report import pooled_summaries  # noqa: E402
 from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator  # noqa: E402
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions  # noqa: E402
@@ -70,16 +68,6 @@ def make_bags(work: Path, args: argparse.Namespace) -> dict[tuple[str, str], lis
                 object_set=object_set, object_name=spec.name, views=args.views, seed=args.seed + index, **scene))
                 for index, spec in enumerate(OBJECTS[object_set]())]
     return bags
-
-
-def evaluate_set(bags: list[Path], ground_truth: GroundTruthOptions, estimator: ViewSetEstimator,
-                 protocol: EvaluationProtocol) -> dict:
-    """The pooled aggregates of the model and of random poses over a set's bags, its distinct pairs, its failures."""
-    evaluations = [evaluate_bag(bag, estimator, ground_truth, protocol, show_progress=False) for bag in bags]
-    model, random = pooled_summaries(evaluations)
-    seconds = [estimate["seconds"] for evaluation in evaluations for estimate in evaluation.estimates]
-    return {"model": model, "random": random, "failed_estimates": sum(len(e.failures) for e in evaluations),
-            "seconds_per_estimate": sum(seconds) / len(seconds)}
 
 
 def table(results: dict[str, dict]) -> str:

@@ -54,11 +54,13 @@ def make_bags(work: Path, views: int, seed: int) -> dict[str, list[Path]]:
 
 def evaluate_set(bags: list[Path], ground_truth: GroundTruthOptions, estimator: ViewSetEstimator,
                  protocol: EvaluationProtocol) -> dict:
-    """The pooled aggregates of the model and of random poses over a set's bags."""
+    """The pooled aggregates of the model and of random poses over a set's bags (with the distinct pairs), and how
+    many estimates failed on their views."""
     evaluations = [evaluate_bag(bag, estimator, ground_truth, protocol) for bag in bags]
     model, random = pooled_summaries(evaluations)
     seconds = [estimate["seconds"] for evaluation in evaluations for estimate in evaluation.estimates]
-    return {"model": model, "random": random, "seconds_per_estimate": sum(seconds) / len(seconds)}
+    return {"model": model, "random": random, "failed_estimates": sum(len(e.failures) for e in evaluations),
+            "seconds_per_estimate": sum(seconds) / len(seconds)}
 
 
 def main() -> None:

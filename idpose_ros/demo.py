@@ -1,7 +1,7 @@
 """`./run demo` (or `ros2 run idpose_ros demo`): the main job end to end on what ships with the package.
 
 Evaluates every shipped demo bag with the embedded model, loaded once, n = 2, the `fast` solver
-preset (the paper's schedule, `--preset default`, takes about ten times as long), prints each bag's table,
+preset (the paper's schedule, `--preset default`, takes about twice as long), prints each bag's table,
 then one summary across the demo objects beside the random-pose baseline; then the same for objects the
 model never saw; then the robot's path: a tabletop bag read with its depth, intrinsics and gravity. The model and solver
 options of `evaluate_bag` apply (e.g. `--model-path ~/models/zero123-xl` for real weights).

@@ -17,7 +17,7 @@ camera's tone, the reference augmented by ``idpose_core.demo_model.robot_crops``
 first learns to read the pose (``--robot-from`` of the budget), then grows linearly to ``--robot-share`` over
 ``--robot-ramp`` of the budget.
 
-    python scripts/train_demo_model.py --out idpose_core/assets/demo_model    # 450 min on 2 cores, in 3 sittings
+    python scripts/train_demo_model.py --out DIR    # a sitting of at most 150 min; rerun it for the next one
 """
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def parse_args() -> argparse.Namespace:
                         help="training budget of the whole run, over every sitting: the learning rate and the robot "
                              "crops' share follow it")
     parser.add_argument("--chunk-minutes", type=float, default=150.0,
-                        help="most training minutes of this sitting; rendering the data takes about 8 more")
+                        help="most training minutes of this sitting; rendering the data takes about 5 more")
     parser.add_argument("--demo-share", type=float, default=0.2, help="share of the pairs of the six demo objects")
     parser.add_argument("--toys", type=int, default=300, help="composed toys in the training catalogue")
     parser.add_argument("--mesh-variants", type=int, default=4, help="variants of every pybullet_data mesh")

@@ -23,7 +23,7 @@ from idpose_ros import evaluate_bag
 from idpose_ros.dataset.synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, SyntheticBagOptions, make_bag
 from idpose_ros.evaluation import bag_evaluation, estimators
 from idpose_ros.evaluation.bag_io import TYPESTORE, BagWriter
-from idpose_ros.evaluation.bag_report import border_views, write_report
+from idpose_ros.evaluation.bag_report import border_views, distinct_pairs, write_report
 from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 from idpose_ros.node import estimator_node
@@ -219,3 +219,10 @@ def test_an_implausible_view_fails_its_estimates_only(tmp_path, demo_bag, oracle
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert [f["views"] for f in report["failed_estimates"]] == [f["views"] for f in run.failures]
     assert "## Failed estimates (not scored)" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_distinct_pairs_count_a_repeated_pick_once_and_pairs_of_two_bags_apart():
+    pair = {"n": 2, "anchor_view": 0, "view": 1}
+    records = [pair, dict(pair), {**pair, "view": 2}, {**pair, "n": 4}]
+    assert distinct_pairs(records) == 3
+    assert distinct_pairs([{**pair, "bag": "a"}, {**pair, "bag": "b"}]) == 2

@@ -81,13 +81,18 @@ def intrinsics_note(evaluation: BagEvaluation) -> str:
     return f"the CameraInfo on {topic} nearest in time to each anchor view"
 
 
+def distinct_pairs(records: Sequence[dict[str, Any]]) -> int:
+    """How many different pairs ``records`` score: a pick the protocol repeats counts once (records of several bags
+    carry a ``bag`` key telling them apart)."""
+    return len({(record.get("bag"), record["n"], record["anchor_view"], record["view"]) for record in records})
+
+
 def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, float | int], dict[str, float | int]]:
     """Over several evaluations: the model's summary of all their pairs (with ``distinct_pairs``: the pairs of
     different views, a pick repeated by the protocol counted once), and the random-pose baseline's RotAcc@15/30 and
     mean rotation error weighted by each evaluation's guesses."""
     model = aggregate([pair for evaluation in evaluations for pair in evaluation.records])["all"]
-    model["distinct_pairs"] = sum(len({(pair["n"], pair["anchor_view"], pair["view"]) for pair in evaluation.records})
-                                  for evaluation in evaluations)
+    model["distinct_pairs"] = sum(distinct_pairs(evaluation.records) for evaluation in evaluations)
     rows = [evaluation.random_aggregates["all"] for evaluation in evaluations]
     guesses = sum(row["pairs"] for row in rows)
     random = {key: sum(row[key] * row["pairs"] for row in rows) / guesses
