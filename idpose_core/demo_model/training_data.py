@@ -163,13 +163,11 @@ class RobotCrops:
 @dataclass(frozen=True)
 class PairBatch:
     """B view pairs: ``reference``/``target`` (B, 3, r, r) in [-1, 1], true relative ``pose`` (B, 3)
-    reference -> target, the reference's absolute camera ``reference_view`` (B, 3), and the indices
-    (object, reference view, target view) each (B,)."""
+    reference -> target, and the indices (object, reference view, target view) each (B,)."""
 
     reference: torch.Tensor
     target: torch.Tensor
     pose: torch.Tensor
-    reference_view: torch.Tensor
     object_index: np.ndarray
     reference_index: np.ndarray
     target_index: np.ndarray
@@ -195,10 +193,9 @@ def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: 
         images.append(preprocess_views(pair, window_scale=float(scale)).images)
     small = downsample(torch.cat(images))
     small = small.reshape(len(images), 2, *small.shape[1:])
-    reference_view = views.cameras[object_index, reference_index]
-    pose = relative(reference_view, views.cameras[object_index, target_index])
-    return PairBatch(small[:, 0], small[:, 1], torch.as_tensor(pose, dtype=torch.float32),
-                     torch.as_tensor(reference_view, dtype=torch.float32), object_index, reference_index, target_index)
+    pose = relative(views.cameras[object_index, reference_index], views.cameras[object_index, target_index])
+    return PairBatch(small[:, 0], small[:, 1], torch.as_tensor(pose, dtype=torch.float32), object_index,
+                     reference_index, target_index)
 
 
 def random_pairs(views: RenderedViews, rng: np.random.Generator, count: int) -> tuple[np.ndarray, ...]:
