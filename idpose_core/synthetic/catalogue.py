@@ -59,11 +59,15 @@ def has_uv(mesh: str) -> bool:
     return any(line.startswith("vt ") for line in (DATA_PATH / mesh).read_text().splitlines())
 
 
+def extent(vertices: np.ndarray) -> float:
+    """The largest side of the bounding box of vertices (V, 3)."""
+    return float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+
+
 @cache
 def mesh_extent(mesh: str) -> float:
-    """The largest side of the mesh's bounding box in its own units (primitives are scaled to 1 by it)."""
-    vertices = _part_vertices(Part(mesh))
-    return float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+    """The mesh's ``extent`` in its own units (primitives are scaled to 1 by it)."""
+    return extent(_part_vertices(Part(mesh)))
 
 
 def _surface(mesh: str, rng: np.random.Generator) -> dict:
@@ -79,11 +83,11 @@ def _orientation(rng: np.random.Generator) -> tuple[float, float, float]:
 
 def _markers(vertices: np.ndarray, rng: np.random.Generator, count: int) -> tuple[Part, ...]:
     """``count`` small cubes or spheres in random colours on random vertices: colour cues that break symmetry."""
-    extent = float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+    size_of_object = extent(vertices)
     markers = []
     for _ in range(count):
         mesh = str(rng.choice(("cube.obj", "sphere_smooth.obj")))
-        size = rng.uniform(0.15, 0.35) * extent * (1.0 if mesh == "cube.obj" else 0.5)
+        size = rng.uniform(0.15, 0.35) * size_of_object * (1.0 if mesh == "cube.obj" else 0.5)
         at = vertices[int(rng.integers(len(vertices)))]
         markers.append(Part(mesh, rgba=random_colour(rng), scale=(size,) * 3, position=tuple(float(x) for x in at),
                             orientation_deg=_orientation(rng)))
