@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """Accuracy of the embedded demo model, measured with ``evaluate_bag`` on bags no training run saw.
 
-Renders fresh bags with ``make_synthetic_bag`` (camera seed ``--seed``; training used its own
-random cameras): one per demo object (held-out views of the training objects) and one per held-out
+Renders fresh bags with ``make_synthetic_bag`` (camera seed ``--seed`` plus the object's index; training used
+its own random cameras): one per demo object (held-out views of the training objects) and one per held-out
 object (the first of the catalogue's benchmark objects, ``random_urdfs`` blobs the model never saw). Runs
 ``evaluate_bag`` offline on each (``--n 2``, ``--samples`` picks, the solver preset and model precision given),
-and sums the pairs up per set beside the random-pose baseline that ``evaluate_bag`` scores on the same pairs. Prints the
-table and writes bench/results/demo_model_accuracy.json (``_<precision>`` before ``.json`` unless float32).
+and sums the pairs up per set beside the random-pose baseline that ``evaluate_bag`` scores on the same pairs. Prints
+the table and writes bench/results/demo_model_accuracy.json (``_<precision>`` before ``.json`` unless float32).
 
     python bench/demo_model_accuracy.py [--samples 4] [--heldout 6] [--preset default] [--precision bfloat16]
 """
@@ -40,9 +40,10 @@ def evaluate_set(object_set: str, names: list[str], estimator: ViewSetEstimator,
                  work: Path) -> dict:
     """Make one bag per object, evaluate each; the pooled aggregates of the model and of random poses."""
     evaluations = []
-    for name in names:
+    for index, name in enumerate(names):  # each bag its own cameras: one seed would repeat the relative poses
         bag = work / f"{object_set}_{name}"
-        make_bag(bag, SyntheticBagOptions(object_set=object_set, object_name=name, views=args.views, seed=args.seed))
+        make_bag(bag, SyntheticBagOptions(object_set=object_set, object_name=name, views=args.views,
+                                          seed=args.seed + index))
         evaluations.append(evaluate_bag(bag, estimator, protocol=EvaluationProtocol(args.samples, args.seed, (2,))))
         print(write_report(work / f"report_{object_set}_{name}", evaluations[-1]), flush=True)
     seconds = [estimate["seconds"] for evaluation in evaluations for estimate in evaluation.estimates]

@@ -41,7 +41,6 @@ from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOr
 from idpose_core.synthetic.scenes import SceneRenderer, demo_objects, oracle_objects  # noqa: E402
 from idpose_ros.dataset.synthetic_bag import IMU_TOPIC, SyntheticBagOptions, make_bag  # noqa: E402
 from idpose_ros.evaluation.bag_evaluation import evaluate_bag  # noqa: E402
-from idpose_ros.evaluation.bag_report import distinct_pairs  # noqa: E402
 from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator  # noqa: E402
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions  # noqa: E402
@@ -80,8 +79,8 @@ def accuracy(records: list[dict]) -> dict[str, float]:
     """RotAcc@15/30 and median rotation error of pair records, with the number of distinct pairs (``bag`` names the
     bag of each record: the same views of two bags are two pairs)."""
     summary = aggregate(records)["all"]
-    figures = {key: summary[key] for key in ("rot_acc_15", "rot_acc_30", "median_rot_err_deg")}
-    return {"pairs": distinct_pairs(records), **figures}
+    return {"pairs": summary["distinct_pairs"],
+            **{key: summary[key] for key in ("rot_acc_15", "rot_acc_30", "median_rot_err_deg")}}
 
 
 def bag_sets(rows: dict, args: argparse.Namespace, work: Path) -> dict[str, dict]:

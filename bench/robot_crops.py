@@ -2,13 +2,13 @@
 """The demo model on a robot's crops: poses on tabletop scenes with depth, under the training light and under
 random lights, and on white, for one or more model folders side by side.
 
-Renders fresh bags with ``make_synthetic_bag`` (seed ``--seed``, never used in training): per demo object a
-tabletop bag (textured table among 2-4 other objects, aligned 16UC1 depth and camera_info) lit by the white
-scenes' light (``--light training``), the same scene lit by a random lamp with shadows (``--light random``), and
-a white-background bag from fresh cameras. Runs ``evaluate_bag`` offline on each (n = 2, ``--samples`` picks,
-``--preset``; the tabletop bags with their depth and intrinsics, so the masks come from depth) and sums the pairs
-up per set beside the random-pose baseline scored on the same pairs. Prints one table and writes
-bench/results/robot_crops.json.
+Renders fresh bags with ``make_synthetic_bag`` (seed ``--seed`` plus the object's index, never used in training):
+per demo object a tabletop bag (textured table among 2-4 other objects, aligned 16UC1 depth and camera_info) lit
+by the white scenes' light (``--light training``), the same scene lit by a random lamp with shadows
+(``--light random``), and a white-background bag from fresh cameras. Runs ``evaluate_bag`` offline on each
+(n = 2, ``--samples`` picks, ``--preset``; the tabletop bags with their depth and intrinsics, so the masks come
+from depth) and sums the pairs up per set beside the random-pose baseline scored on the same pairs. Prints one
+table and writes bench/results/robot_crops.json.
 
     python bench/robot_crops.py --model new=idpose_core/assets/demo_model --model old=/path/to/old_model
 """
@@ -46,9 +46,11 @@ SETS = {  # name -> (bag options besides object and seed, ground-truth options)
 
 
 def make_bags(work: Path, views: int, seed: int) -> dict[str, list[Path]]:
-    """Every set's bags, one per demo object."""
+    """Every set's bags, one per demo object, each its own cameras (seed ``seed`` plus the object's index: one seed
+    for all would give every object the same relative poses)."""
     return {name: [make_bag(work / f"{index}_{spec.name}", SyntheticBagOptions(
-        object_name=spec.name, views=views, seed=seed, **options)) for spec in demo_objects()]
+        object_name=spec.name, views=views, seed=seed + number, **options))
+        for number, spec in enumerate(demo_objects())]
         for index, (name, (options, _)) in enumerate(SETS.items())}
 
 

@@ -17,6 +17,7 @@ from idpose_core.spherical import relative
 
 ROT_THRESHOLDS_DEG = (15.0, 30.0)
 POS_THRESHOLD = 0.2
+OBJECT_KEYS = ("dataset", "input", "bag")  # what tells apart the pooled records of different objects
 
 
 def rotation_angle_deg(rot_a: np.ndarray, rot_b: np.ndarray) -> np.ndarray:
@@ -70,8 +71,8 @@ def random_relative_poses(anchor_sph: np.ndarray, shape: tuple[int, ...], rng: n
     return relative(anchor_sph, guess)
 
 
-def _summary(rot_err: np.ndarray, pos_err: np.ndarray) -> dict[str, float | int]:
-    summary: dict[str, float | int] = {"pairs": int(rot_err.size)}
+def _summary(rot_err: np.ndarray, pos_err: np.ndarray, distinct_pairs: int) -> dict[str, float | int]:
+    summary: dict[str, float | int] = {"pairs": int(rot_err.size), "distinct_pairs": distinct_pairs}
     for threshold in ROT_THRESHOLDS_DEG:
         summary[f"rot_acc_{threshold:g}"] = float(np.mean(rot_err < threshold))
     summary[f"pos_acc_{POS_THRESHOLD:g}"] = float(np.mean(pos_err < POS_THRESHOLD))
@@ -87,10 +88,12 @@ def aggregate(records: Iterable[Mapping]) -> dict[str, dict[str, float | int]]:
 
     ``records`` are per-pair mappings with at least ``n`` (views in the set), ``rot_err_deg`` and
     ``pos_err``. Returns a JSON-ready dict keyed by ``str(n)`` in increasing order, then ``"all"``; each
-    group has ``pairs``, ``rot_acc_15``, ``rot_acc_30``, ``pos_acc_0.2``, ``mean_rot_err_deg``,
-    ``median_rot_err_deg``, ``mean_pos_err`` and ``median_pos_err``.
+    group has ``pairs``, ``distinct_pairs`` (``pair_identity``: a pair scored twice counts once),
+    ``rot_acc_15``, ``rot_acc_30``, ``pos_acc_0.2``, ``mean_rot_err_deg``, ``median_rot_err_deg``,
+    ``mean_pos_err`` and ``median_pos_err``.
     """
     groups: dict[int, list[tuple[float, float]]] = defaultdict(list)
+    identities: dict[int, set[tuple]] = defaultdict(set)
     for index, record in enumerate(records):
         missing = [key for key in ("n", "rot_err_deg", "pos_err") if key not in record]
         if missing:
@@ -99,9 +102,19 @@ def aggregate(records: Iterable[Mapping]) -> dict[str, dict[str, float | int]]:
         if not (np.isfinite(rot_err) and np.isfinite(pos_err)):
             raise ValueError(f"metric record {index} has a non-finite error ({rot_err}, {pos_err})")
         groups[int(record["n"])].append((rot_err, pos_err))
+        identities[int(record["n"])].add(pair_identity(record, index))
     if not groups:
         raise ValueError("no metric records to aggregate")
-    result = {str(n): _summary(*np.array(groups[n]).T) for n in sorted(groups)}
+    result = {str(n): _summary(*np.array(groups[n]).T, len(identities[n])) for n in sorted(groups)}
     every = np.array([pair for n in sorted(groups) for pair in groups[n]])
-    result["all"] = _summary(*every.T)
+    result["all"] = _summary(*every.T, sum(len(pairs) for pairs in identities.values()))
     return result
+
+
+def pair_identity(record: Mapping, index: int) -> tuple:
+    """What makes a scored pair different from another: its object (``dataset``, ``input`` or ``bag``, where the
+    records of several are pooled), its view count and its two view ids; a record without view ids (``anchor_view``,
+    ``view``) is its own pair (``index``: its place in the records)."""
+    if "anchor_view" not in record or "view" not in record:
+        return ("record", index)
+    return (*(record.get(key) for key in OBJECT_KEYS), int(record["n"]), record["anchor_view"], record["view"])

@@ -23,7 +23,7 @@ from idpose_ros import evaluate_bag
 from idpose_ros.dataset.synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, SyntheticBagOptions, make_bag
 from idpose_ros.evaluation import bag_evaluation, estimators
 from idpose_ros.evaluation.bag_io import TYPESTORE, BagWriter
-from idpose_ros.evaluation.bag_report import border_views, distinct_pairs, write_report
+from idpose_ros.evaluation.bag_report import border_views, picks_sentence, write_report
 from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 from idpose_ros.node import estimator_node
@@ -60,8 +60,8 @@ def oracle_run(demo_bag, oracle):
 
 def test_the_oracle_scores_100_percent_on_every_view_count(oracle_run, oracle):
     run = oracle_run
-    assert len(run.picks) == 2 and run.picks[0] != run.picks[1]
-    assert all(len(pick) == 8 and pick == sorted(pick) for pick in run.picks)  # capture order
+    assert len(run.picks) == 2 and run.picks[0][:2] != run.picks[1][:2]
+    assert all(len(pick) == 8 and pick[0] < pick[1] and pick[2:] == sorted(pick[2:]) for pick in run.picks)
     # the oracle saw exactly the views of each estimate, in order: images and ids travel together
     assert oracle.identified[:8] == [estimate["views"] for estimate in run.estimates]
     aggregates = run.aggregates
@@ -118,6 +118,8 @@ def test_report_files(tmp_path, oracle_run):
     assert all(estimate["views_touching_border"] == [] for estimate in report["estimates"])
     markdown = (out / "report.md").read_text()
     assert table in markdown and "0 had a view whose object mask touches the image border" in markdown
+    assert report["protocol"]["picks_drawn"] == 2 and "2 picks of 8 views (seed 0), evaluated" in markdown
+    assert "| distinct pairs |" in table
     assert "| ID-Pose (full) | 8 | 100.0 | 100.0 | 100.0 |" in table
     assert "| ID-Pose (full) | all | 100.0 | 100.0 | 100.0 |" in table
     assert "| random poses | all |" in table and report["random_baseline"]["guesses_per_pair"] == 200
@@ -221,8 +223,8 @@ def test_an_implausible_view_fails_its_estimates_only(tmp_path, demo_bag, oracle
     assert "## Failed estimates (not scored)" in (tmp_path / "out" / "report.md").read_text()
 
 
-def test_distinct_pairs_count_a_repeated_pick_once_and_pairs_of_two_bags_apart():
-    pair = {"n": 2, "anchor_view": 0, "view": 1}
-    records = [pair, dict(pair), {**pair, "view": 2}, {**pair, "n": 4}]
-    assert distinct_pairs(records) == 3
-    assert distinct_pairs([{**pair, "bag": "a"}, {**pair, "bag": "b"}]) == 2
+def test_a_pool_with_fewer_pairs_than_samples_says_so():
+    sentence = picks_sentence(3, EvaluationProtocol(samples=5, seed=1), 3, 3)
+    assert sentence == ("3 picks of 3 views (seed 1), not the 5 requested: 3 usable views hold only 3 different "
+                        "pairs, and no pair is scored twice")
+    assert "requested" not in picks_sentence(5, EvaluationProtocol(samples=5), 8, 12)

@@ -6,7 +6,7 @@ import pytest
 
 from idpose_core.cameras import anchor_frame_poses, opengl_to_optical, spherical_to_c2w
 from idpose_core.evaluation.object_frame import object_frame_c2w, world_cameras, world_to_object
-from idpose_core.evaluation.picks import draw_picks
+from idpose_core.evaluation.picks import distinct_pair_count, draw_picks
 from idpose_core.evaluation.scoring import score_poses
 from idpose_core.gravity import with_roll
 from idpose_core.stamps import match_stamps
@@ -14,19 +14,26 @@ from idpose_core.synthetic.scenes import rolled_optical_frames
 from idpose_core.transforms import invert_transform
 
 
-def test_picks_are_seeded_distinct_sorted_subsets():
+def test_picks_are_seeded_and_open_with_different_pairs_in_capture_order():
     pool = [0, 2, 3, 5, 7, 8, 9, 11, 12, 14, 15]
-    picks = draw_picks(pool, samples=5, seed=3)
-    assert picks == draw_picks(pool, samples=5, seed=3)
-    assert picks != draw_picks(pool, samples=5, seed=4)
+    picks = draw_picks(pool, samples=20, seed=3)
+    assert picks == draw_picks(pool, samples=20, seed=3)
+    assert picks != draw_picks(pool, samples=20, seed=4)
     for pick in picks:
-        assert len(pick) == 8 and len(set(pick)) == 8
-        assert pick == sorted(pick) and set(pick) <= set(pool)
-    assert len({tuple(p) for p in picks}) > 1
+        assert len(pick) == 8 and len(set(pick)) == 8 and set(pick) <= set(pool)
+        assert pick[0] < pick[1] and pick[2:] == sorted(pick[2:])
+    assert len({tuple(pick[:2]) for pick in picks}) == 20
 
 
-def test_small_pools_give_smaller_picks_and_tiny_ones_are_refused():
-    assert draw_picks([4, 1, 9], samples=2, seed=0) == [[1, 4, 9], [1, 4, 9]]
+def test_a_small_pool_gives_one_pick_per_pair_never_a_repeat():
+    picks = draw_picks([4, 1, 9], samples=5, seed=0)
+    assert len(picks) == distinct_pair_count(3) == 3
+    assert sorted(tuple(pick[:2]) for pick in picks) == [(1, 4), (1, 9), (4, 9)]
+    assert all(sorted(pick) == [1, 4, 9] for pick in picks)
+    assert [pick[:2] for pick in draw_picks([1, 2, 3, 4, 5, 6], samples=15, seed=1)] != [[1, 2]] * 15
+
+
+def test_tiny_pools_and_no_samples_are_refused():
     with pytest.raises(ValueError, match="at least 2 usable views"):
         draw_picks([4], samples=1, seed=0)
     with pytest.raises(ValueError, match="samples"):

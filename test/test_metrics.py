@@ -105,13 +105,22 @@ def test_aggregate_groups_by_view_count():
     report = aggregate(records)
     assert list(report) == ["2", "3", "all"]
     assert report["2"] == {
-        "pairs": 2, "rot_acc_15": 0.5, "rot_acc_30": 1.0, "pos_acc_0.2": 0.5,
+        "pairs": 2, "distinct_pairs": 2, "rot_acc_15": 0.5, "rot_acc_30": 1.0, "pos_acc_0.2": 0.5,
         "mean_rot_err_deg": 15.0, "median_rot_err_deg": 15.0, "mean_pos_err": 0.2, "median_pos_err": 0.2,
     }
     assert report["3"]["rot_acc_30"] == 0.5 and report["3"]["pos_acc_0.2"] == 1.0
     assert report["all"]["pairs"] == 4 and report["all"]["rot_acc_15"] == 0.5
     assert report["all"]["mean_rot_err_deg"] == pytest.approx(84.9 / 4)
     assert json.loads(json.dumps(report)) == report
+
+
+def test_distinct_pairs_count_a_repeated_pair_once_and_the_pairs_of_two_objects_apart():
+    pair = {"n": 2, "anchor_view": 0, "view": 1, "rot_err_deg": 5.0, "pos_err": 0.1}
+    report = aggregate([pair, dict(pair), {**pair, "view": 2}, {**pair, "n": 4}])
+    assert (report["2"]["pairs"], report["2"]["distinct_pairs"]) == (3, 2)
+    assert (report["all"]["pairs"], report["all"]["distinct_pairs"]) == (4, 3)
+    for key in ("bag", "input", "dataset"):
+        assert aggregate([{**pair, key: "a"}, {**pair, key: "b"}])["all"]["distinct_pairs"] == 2
 
 
 def test_accuracy_thresholds_are_strict():

@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 
 from idpose_core.baselines import DEFAULT_FOV_DEG, TITLES  # noqa: E402
 from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
+from idpose_core.evaluation.protocol import EvaluationProtocol  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_ros.evaluation.bag_evaluation import BagEvaluation  # noqa: E402
 from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
@@ -22,7 +23,8 @@ from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 RANDOM_METHOD = "random poses"
 COLUMNS = (("rot_acc_15", "RotAcc@15° ↑", True), ("rot_acc_30", "RotAcc@30° ↑", True),
            ("pos_acc_0.2", "PosAcc@0.2 ↑", True), ("mean_rot_err_deg", "mean rot. err. (°) ↓", False),
-           ("mean_pos_err", "mean pos. err. ↓", False), ("pairs", "pairs", False))
+           ("mean_pos_err", "mean pos. err. ↓", False), ("pairs", "pairs", False),
+           ("distinct_pairs", "distinct pairs", False))
 
 
 def model_name(model: dict[str, Any]) -> str:
@@ -40,8 +42,8 @@ def markdown_table(methods: dict[str, dict[str, dict[str, float | int]]]) -> str
     rows = []
     for method, aggregates in methods.items():
         for group, summary in aggregates.items():
-            cells = [f"{100.0 * summary[key]:.1f}" if percent else
-                     str(summary[key]) if key == "pairs" else f"{summary[key]:.3g}" for key, _, percent in COLUMNS]
+            cells = [f"{100.0 * summary[key]:.1f}" if percent else str(summary[key]) if key.endswith("pairs")
+                     else f"{summary[key]:.3g}" for key, _, percent in COLUMNS]
             rows.append(f"| {method} | {group} | " + " | ".join(cells) + " |")
     return "\n".join([header, rule, *rows])
 
@@ -81,23 +83,26 @@ def intrinsics_note(evaluation: BagEvaluation) -> str:
     return f"the CameraInfo on {topic} nearest in time to each anchor view"
 
 
-def distinct_pairs(records: Sequence[dict[str, Any]]) -> int:
-    """How many different pairs ``records`` score: a pick the protocol repeats counts once (records of several bags
-    carry a ``bag`` key telling them apart)."""
-    return len({(record.get("bag"), record["n"], record["anchor_view"], record["view"]) for record in records})
-
-
 def pooled_summaries(evaluations: Sequence[BagEvaluation]) -> tuple[dict[str, float | int], dict[str, float | int]]:
-    """Over several evaluations: the model's summary of all their pairs (with ``distinct_pairs``: the pairs of
-    different views, a pick repeated by the protocol counted once), and the random-pose baseline's RotAcc@15/30 and
+    """Over several evaluations: the model's summary of all their pairs (``distinct_pairs`` tells the evaluations'
+    pairs apart), and the random-pose baseline's RotAcc@15/30 and
     mean rotation error weighted by each evaluation's guesses."""
-    model = aggregate([pair for evaluation in evaluations for pair in evaluation.records])["all"]
-    model["distinct_pairs"] = sum(distinct_pairs(evaluation.records) for evaluation in evaluations)
+    model = aggregate([{**pair, "bag": index} for index, evaluation in enumerate(evaluations)
+                       for pair in evaluation.records])["all"]
     rows = [evaluation.random_aggregates["all"] for evaluation in evaluations]
     guesses = sum(row["pairs"] for row in rows)
     random = {key: sum(row[key] * row["pairs"] for row in rows) / guesses
               for key in ("rot_acc_15", "rot_acc_30", "mean_rot_err_deg")}
     return model, {"guesses": guesses, **random}
+
+
+def picks_sentence(drawn: int, protocol: EvaluationProtocol, pick_size: int, pool_size: int) -> str:
+    """How many picks were evaluated, and why fewer than ``--samples`` when the pool holds fewer different pairs."""
+    sentence = f"{drawn} pick{'s' if drawn != 1 else ''} of {pick_size} views (seed {protocol.seed})"
+    if drawn < protocol.samples:
+        sentence += (f", not the {protocol.samples} requested: {pool_size} usable views hold only {drawn} different "
+                     "pairs, and no pair is scored twice")
+    return sentence
 
 
 def border_views(estimate: dict[str, Any]) -> list[int] | None:
@@ -182,7 +187,8 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
         "inputs": {**asdict(gt.extras), "used": inputs_summary(run)},
         "mode": mode, "model": model,
         "node_parameters": {"solver_preset": preset, **values},
-        "protocol": {"samples": protocol.samples, "seed": protocol.seed, "pick_size": len(run.picks[0]),
+        "protocol": {"samples": protocol.samples, "picks_drawn": len(run.picks), "seed": protocol.seed,
+                     "pick_size": len(run.picks[0]),
                      "view_counts": run.view_counts, "object_center": list(gt.object_center), "up": list(gt.up),
                      "radius_unit": "relative radii in Zero-1-to-3 units: the anchor distance is 1.85"},
         "views": {"total": len(views.views), "usable": len(views.pool), "skipped": [
@@ -205,8 +211,7 @@ def write_report(out: Path, evaluation: BagEvaluation) -> str:
     (out / "report.md").write_text(
         f"# Pose evaluation of `{run.bag}`\n\n"
         f"{method}, mode {mode}, model {model_name(model)}, solver preset {preset}. "
-        f"{protocol.samples} pick{'s' if protocol.samples != 1 else ''} of {report['protocol']['pick_size']} views "
-        f"(seed {protocol.seed}), "
+        f"{picks_sentence(len(run.picks), protocol, report['protocol']['pick_size'], len(views.pool))}, "
         f"evaluated on their first {', '.join(map(str, run.view_counts))} views; the first view is the anchor.\n"
         f"Ground truth: {report['ground_truth']}. {inputs_sentence(gt.extras, report['inputs']['used'])}"
         f"Views on {gt.image_topic}: {len(views.views)}, "
