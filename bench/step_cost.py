@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import os
 import platform
@@ -50,16 +51,26 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from idpose_core.model_loading import PRECISIONS  # noqa: E402
 from idpose_core.solver import SolverConfig  # noqa: E402
-from idpose_core.solver.context import SolverContext  # noqa: E402
-from idpose_core.solver.exploration import adjust  # noqa: E402
+from idpose_core.solver.context import SolverContext, diffusion_step  # noqa: E402
+from idpose_core.solver.exploration import adjust, candidate_grid  # noqa: E402
 from idpose_core.zero123 import Zero123Config, Zero123Predictor  # noqa: E402
 
 OFFICIAL_KINDS = ("official_step", "official_probe")
 OURS_KINDS = ("ours_step", "ours_adjust", "ours_probe")
-ADJUSTED_CANDIDATES = 20  # the better half of the 8 x 5 grid, one non-anchor view
-PROBE_BATCH = 16
-PROBE_T = 200
-REFINE_T = (200, 210)
+DEFAULTS = SolverConfig()  # steps and probes are timed as the solver runs them by default
+ADJUSTED_CANDIDATES = len(candidate_grid(DEFAULTS)) // 2  # the better half of the grid, one non-anchor view
+PROBE_BATCH = DEFAULTS.probe_batch
+
+
+def probe_step(predictor) -> int:
+    """The probes' diffusion step for this predictor's schedule."""
+    return diffusion_step(DEFAULTS.probe_t, predictor.num_train_timesteps)
+
+
+def refinement_step(predictor, generator: torch.Generator) -> torch.Tensor:
+    """A refinement step's diffusion step (1,), drawn from the solver's range for this predictor's schedule."""
+    low, high = (diffusion_step(fraction, predictor.num_train_timesteps) for fraction in DEFAULTS.refine_t_range)
+    return torch.randint(low, high + 1, (1,), generator=generator)
 
 
 def main() -> None:
@@ -180,15 +191,16 @@ def ours_step(predictor, views, generator) -> dict:
     """One refinement step as the solver runs it: 1 sample, pose-only gradient, cached views."""
     start = time.perf_counter()
     pose = torch.tensor([[0.2, 1.0, 0.0]], requires_grad=True)
-    t = torch.randint(REFINE_T[0], REFINE_T[1] + 1, (1,), generator=generator)
+    t = refinement_step(predictor, generator)
     noise = torch.randn(1, *views.noise_shape, generator=generator)
     predictor.noise_error(views, torch.tensor([0]), torch.tensor([1]), pose, t, noise).sum().backward()
     return {"total": time.perf_counter() - start}
 
 
 def ours_adjust(predictor, views) -> dict:
-    """One adjust step of the solver's exploration: 20 candidates, forward direction, chunks of grad_batch."""
-    config = SolverConfig(adjust_steps=1)
+    """One adjust step of the solver's exploration: the better half of the default grid, forward direction, chunks
+    of grad_batch."""
+    config = dataclasses.replace(DEFAULTS, adjust_steps=1)
     context = SolverContext(predictor, views, config)
     starts = torch.tensor([[0.2, 0.3 * k, 0.0] for k in range(ADJUSTED_CANDIDATES)])
     start = time.perf_counter()
@@ -213,7 +225,7 @@ def official_step(predictor, images, generator) -> dict:
     ref_latents, tgt_latents, embeds = official_encode(predictor, images[:1], images[1:], generator)
     encoded = time.perf_counter()
     pose = torch.tensor([[0.2, 1.0, 0.0]], requires_grad=True)
-    t = torch.randint(REFINE_T[0], REFINE_T[1] + 1, (1,), generator=generator)
+    t = refinement_step(predictor, generator)
     noise = torch.randn(tgt_latents.shape, generator=generator)
     noisy = predictor.modules.scheduler.add_noise(tgt_latents, noise, t)
     eps = predictor.predict_noise(noisy, ref_latents, t, predictor.pose_tokens(embeds, pose))
@@ -223,24 +235,24 @@ def official_step(predictor, images, generator) -> dict:
 
 
 def ours_probe(predictor, views, generator) -> dict:
-    """One probe: one candidate, one direction, 16 noises, forward only, cached views."""
+    """One probe: one candidate, one direction, the default probe batch of noises, forward only, cached views."""
     start = time.perf_counter()
     pose = torch.tensor([[0.2, 1.0, 0.0]]).expand(PROBE_BATCH, 3)
     noise = torch.randn(PROBE_BATCH, *views.noise_shape, generator=generator)
     index = torch.zeros(PROBE_BATCH, dtype=torch.long)
     with torch.no_grad():
-        predictor.noise_error(views, index, index + 1, pose, torch.full((PROBE_BATCH,), PROBE_T), noise)
+        predictor.noise_error(views, index, index + 1, pose, torch.full((PROBE_BATCH,), probe_step(predictor)), noise)
     return {"total": time.perf_counter() - start}
 
 
 def official_probe(predictor, images, generator) -> dict:
-    """One official probe: 16 repeated reference and target images re-encoded, UNet forward on 16."""
+    """One official probe: the probe batch of repeated reference and target images re-encoded, UNet forward."""
     start = time.perf_counter()
     refs, tgts = images[:1].expand(PROBE_BATCH, -1, -1, -1), images[1:].expand(PROBE_BATCH, -1, -1, -1)
     ref_latents, tgt_latents, embeds = official_encode(predictor, refs, tgts, generator)
     encoded = time.perf_counter()
     with torch.no_grad():
-        t = torch.full((PROBE_BATCH,), PROBE_T)
+        t = torch.full((PROBE_BATCH,), probe_step(predictor))
         noise = torch.randn(tgt_latents.shape, generator=generator)
         noisy = predictor.modules.scheduler.add_noise(tgt_latents, noise, t)
         pose = torch.tensor([[0.2, 1.0, 0.0]]).expand(PROBE_BATCH, 3)
@@ -287,7 +299,7 @@ def summarise(runs: dict, args: argparse.Namespace, load_before: tuple) -> dict:
         "setup": {"config": args.config, "image_size": args.size, "official_dtype": "float32",
                   "precisions": args.precisions, "weights": "random", "alternations": args.alternations,
                   "repeats_per_step_measurement": args.repeats, "probe_batch": PROBE_BATCH,
-                  "adjusted_candidates": ADJUSTED_CANDIDATES, "grad_batch": SolverConfig().grad_batch,
+                  "adjusted_candidates": ADJUSTED_CANDIDATES, "grad_batch": DEFAULTS.grad_batch,
                   "definitions": __doc__.split("What is measured")[1].split("Usage:")[0]},
         "runs": runs,
         "median": median,

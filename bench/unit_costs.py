@@ -3,9 +3,10 @@
 Ours, in one precision: a differentiated sample of a one-sample step (refinement, runner-up) costs
 one measured step (``ours_step``); one of the exploration's adjust steps, which share batches of
 ``grad_batch``, costs the measured per-sample time of a solver adjust step (``ours_adjust``); every
-forward-only sample costs 1/16 of a measured probe (``ours_probe``, batch 16, as the Zero-1-to-3
-predictor runs per UNet call); each view is encoded once, costed as one official per-step encode (VAE
-on two images + CLIP on one, so an upper bound for one view's VAE + CLIP). Official (float32, as its
+forward-only sample costs a measured probe over its batch (``ours_probe`` of ``probe_samples``, the
+solver's default probe batch, as the Zero-1-to-3 predictor runs per UNet call); each view is encoded once,
+costed as one official per-step encode (VAE on two images + CLIP on one, so an upper bound for one view's VAE +
+CLIP). Official (float32, as its
 code runs): probes x ``official_probe`` + steps x ``official_step``. Medians of the step_cost run are
 used, either wall seconds or process CPU seconds (these leave out time spent waiting for a core but
 count threads spinning while they wait for each other; the encode share is scaled by the official
@@ -20,7 +21,6 @@ from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
 STEP_COST_FILE = RESULTS / "step_cost.json"
-PROBE_SAMPLES = 16
 MEASURES = ("seconds", "cpu_seconds")
 # Reference figures of a quiet 2-core CPU of the kind measured here (2 threads): one official step (3.1 s of it
 # re-encoding), one official probe, and a frozen float32 UNet step on cached conditioning (ours).
@@ -36,6 +36,7 @@ class UnitCosts:
     ours_step: float
     ours_adjust_sample: float
     ours_probe: float
+    probe_samples: int  # the noise samples of one measured probe
     official_step: float
     official_probe: float
     encode_per_view: float
@@ -65,7 +66,8 @@ class UnitCosts:
         return cls(ours_step=median[f"ours_step@{precision}"][measure],
                    ours_adjust_sample=adjust["per_sample_seconds"] * adjust[measure] / adjust["seconds"],
                    ours_probe=median[f"ours_probe@{precision}"][measure],
-                   official_step=official_step[measure], official_probe=median["official_probe"][measure],
+                   probe_samples=int(report["setup"]["probe_batch"]), official_step=official_step[measure],
+                   official_probe=median["official_probe"][measure],
                    encode_per_view=encode_wall * official_step[measure] / official_step["seconds"],
                    threads=int(report["machine"]["threads"]), precision=precision)
 
@@ -77,7 +79,8 @@ class UnitCosts:
         """
         forward_only = forward_samples - backward_samples
         return (views * self.encode_per_view + adjust_samples * self.ours_adjust_sample
-                + (backward_samples - adjust_samples) * self.ours_step + forward_only * self.ours_probe / PROBE_SAMPLES)
+                + (backward_samples - adjust_samples) * self.ours_step
+                + forward_only * self.ours_probe / self.probe_samples)
 
     def official_seconds(self, probes: int, steps: int) -> float:
         """Projected seconds of one official estimate from its probe and step counts."""
@@ -94,7 +97,7 @@ def reference_costs(measured_cpu: UnitCosts, measured_cpu_float32: UnitCosts) ->
     scale = reference["ours_step"] / measured_cpu_float32.ours_step
     return UnitCosts(ours_step=measured_cpu.ours_step * scale,
                      ours_adjust_sample=measured_cpu.ours_adjust_sample * scale,
-                     ours_probe=measured_cpu.ours_probe * scale,
+                     ours_probe=measured_cpu.ours_probe * scale, probe_samples=measured_cpu.probe_samples,
                      official_step=reference["official_step"], official_probe=reference["official_probe"],
                      encode_per_view=reference["encode"], threads=measured_cpu.threads,
                      precision=measured_cpu.precision)

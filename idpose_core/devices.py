@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import torch
 
+DEVICE_CHOICES = ("auto", "cpu", "cuda")  # what a user picks from; ``resolve_device`` also takes "cuda:N"
+
 
 class DeviceUnavailable(ValueError):
     """The requested device does not exist here; the message names it, why, and what is available."""

@@ -13,8 +13,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-
-from idpose_core.transforms import quaternion_to_matrix
+from scipy.spatial.transform import Rotation
 
 NEAR_VERTICAL = 1e-6  # |up_x|, |up_y| below this: the camera looks straight up or down, any roll is upright
 
@@ -65,18 +64,6 @@ def rz(angle: float) -> np.ndarray:
     """Rotation (3, 3) about the z axis (a camera's optical axis) by ``angle`` radians."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def ry(angle: float) -> np.ndarray:
-    """Rotation (3, 3) about the y axis by ``angle`` radians."""
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rx(angle: float) -> np.ndarray:
-    """Rotation (3, 3) about the x axis by ``angle`` radians."""
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
 def polar_angle(up: np.ndarray, ray: np.ndarray = (0.0, 0.0, 1.0)) -> float:
@@ -130,8 +117,7 @@ def rotation_from_extrinsic(values: Sequence[float]) -> np.ndarray:
     if values.ndim != 1 or len(values) not in (3, 4) or not np.all(np.isfinite(values)):
         raise ValueError(f"a rotation is a quaternion x y z w or roll pitch yaw (rad), got {values.tolist()}")
     if len(values) == 3:
-        roll, pitch, yaw = values
-        return rz(yaw) @ ry(pitch) @ rx(roll)
+        return Rotation.from_euler("xyz", values).as_matrix()  # lower case: fixed axes
     if not np.any(values):
         raise ValueError(f"the quaternion {values.tolist()} is all zero: it has no rotation")
-    return quaternion_to_matrix(values)
+    return Rotation.from_quat(values).as_matrix()

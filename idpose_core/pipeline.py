@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
@@ -24,8 +24,8 @@ from idpose_core.preprocessing import PreprocessedViews, bounding_box, preproces
 from idpose_core.solver import Progress, SampleCount, SolverConfig, SolverResult, estimate_poses
 from idpose_core.view_input import ViewInput
 
-__all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_view_poses", "result_details",
-           "view_crops", "views_mosaic"]
+__all__ = ["PipelineResult", "PipelineSettings", "ViewInput", "ViewReport", "estimate_details", "estimate_view_poses",
+           "result_details", "view_crops", "views_mosaic"]
 
 MODEL_IMAGE_SIZE = 256  # Zero-1-to-3's input side in pixels
 LEVEL_POLAR_DEG = 90.0  # the anchor's polar angle when nothing tells it: a level camera
@@ -180,16 +180,24 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
 
 
 def result_details(result: PipelineResult) -> dict[str, Any]:
-    """What an estimate read off its views, JSON-ready: per view the mask method (and note), gravity's roll and
-    polar angle, the depth distance, whether the mask touches the border and whether the pose is reliable;
-    where the anchor's polar angle and distance came from; the predictor samples it took (evaluated,
-    differentiated, and both per solver stage)."""
+    """What an estimate read off its views, JSON-ready (``estimate_details``)."""
     solved = result.solver_result
-    return {"views": [asdict(view) for view in result.views], "anchor_polar_deg": result.anchor_polar_deg,
-            "polar_source": result.polar_source, "object_distance": result.object_distance,
-            "distance_source": result.distance_source, "forward_samples": solved.forward_samples,
-            "backward_samples": solved.backward_samples,
-            "stage_samples": {stage: list(counts) for stage, counts in solved.stage_samples.items()}}
+    return estimate_details(result.views, result.anchor_polar_deg, result.polar_source, result.object_distance,
+                            result.distance_source, solved.forward_samples, solved.backward_samples,
+                            solved.stage_samples)
+
+
+def estimate_details(views: Sequence[ViewReport], anchor_polar_deg: float, polar_source: str,
+                     object_distance: float, distance_source: str, forward_samples: int, backward_samples: int,
+                     stage_samples: Mapping[str, Sequence[int]]) -> dict[str, Any]:
+    """The one layout of an estimate's details, wherever they are read from (a ``PipelineResult``, or the node's
+    action result): per view the mask method (and note), gravity's roll and polar angle, the depth distance,
+    whether the mask touches the border and whether the pose is reliable; where the anchor's polar angle and
+    distance came from; the predictor samples it took (evaluated, differentiated, and both per solver stage)."""
+    return {"views": [asdict(view) for view in views], "anchor_polar_deg": anchor_polar_deg,
+            "polar_source": polar_source, "object_distance": object_distance, "distance_source": distance_source,
+            "forward_samples": forward_samples, "backward_samples": backward_samples,
+            "stage_samples": {stage: list(counts) for stage, counts in stage_samples.items()}}
 
 
 def view_crops(images: torch.Tensor) -> np.ndarray:

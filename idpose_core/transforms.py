@@ -1,4 +1,4 @@
-"""Rigid transforms over time, as a TF tree: chained lookups, lerp/slerp interpolation (numpy only).
+"""Rigid transforms over time, as a TF tree: chained lookups, lerp/slerp interpolation (numpy, scipy's rotations).
 
 A transform ``T_parent_child`` (4, 4) maps points in the child frame to the parent frame, i.e. it
 is the pose of the child in the parent, as in a ``geometry_msgs/TransformStamped``. Quaternions are
@@ -9,78 +9,31 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
 
 
 class TransformLookupError(LookupError):
     """A transform between two frames at a stamp is not available (unknown frame, no link, out of range)."""
 
 
-def quaternion_to_matrix(quaternion: np.ndarray) -> np.ndarray:
-    """Unit quaternion(s) ``(..., 4)`` as (x, y, z, w) -> rotation matrices ``(..., 3, 3)``; normalises first."""
-    q = np.asarray(quaternion, dtype=np.float64)
-    norm = np.linalg.norm(q, axis=-1, keepdims=True)
-    if np.any(norm < 1e-12):
-        raise ValueError("quaternion of zero length has no rotation")
-    x, y, z, w = np.moveaxis(q / norm, -1, 0)
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
-
-
-def _matrix_to_quaternion_single(r: np.ndarray) -> np.ndarray:
-    """One rotation (3, 3) -> (x, y, z, w) by the numerically safest diagonal (Shepperd), canonically signed."""
-    trace = np.trace(r)
-    if trace > max(r[0, 0], r[1, 1], r[2, 2]):
-        s = 2.0 * np.sqrt(1.0 + trace)
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, s / 4]
-    elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        q = [s / 4, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
-    elif r[1, 1] >= r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-        q = [(r[0, 1] + r[1, 0]) / s, s / 4, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-        q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, s / 4, (r[1, 0] - r[0, 1]) / s]
-    return canonical_sign(np.asarray(q))
-
-
-def canonical_sign(q: np.ndarray) -> np.ndarray:
-    """The one of q, -q (both the same rotation) with w > 0, or, when w == 0, whose first non-zero of x, y, z
-    is positive: the convention ``msg_adapters.quaternions`` follows too, so both layers write the same numbers."""
-    leading = next((value for value in q[[3, 0, 1, 2]] if value != 0.0), 1.0)
-    return q if leading > 0 else -q
-
-
-def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` -> unit quaternions ``(..., 4)`` as (x, y, z, w), signed by
-    ``canonical_sign``."""
-    r = np.asarray(rotation, dtype=np.float64)
-    flat = r.reshape(-1, 3, 3)
-    quats = np.stack([_matrix_to_quaternion_single(m) for m in flat]) if len(flat) else np.zeros((0, 4))
-    return quats.reshape(r.shape[:-2] + (4,))
-
-
 def rigid_transform(translation: np.ndarray, quaternion: np.ndarray) -> np.ndarray:
-    """Translation ``(..., 3)`` and quaternion ``(..., 4)`` (x, y, z, w) -> homogeneous ``(..., 4, 4)``."""
-    t = np.asarray(translation, dtype=np.float64)
-    rotation = quaternion_to_matrix(quaternion)
+    """Translation ``(..., 3)`` and quaternion ``(..., 4)`` (x, y, z, w, any non-zero norm) -> homogeneous
+    ``(..., 4, 4)``; ValueError for a zero quaternion."""
+    q = np.asarray(quaternion, dtype=np.float64)
+    rotation = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
     out = np.zeros(rotation.shape[:-2] + (4, 4))
     out[..., :3, :3] = rotation
-    out[..., :3, 3] = t
+    out[..., :3, 3] = np.asarray(translation, dtype=np.float64)
     out[..., 3, 3] = 1.0
     return out
 
 
 def split_transform(transform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Homogeneous ``(..., 4, 4)`` -> (translation ``(..., 3)``, quaternion ``(..., 4)`` x, y, z, w)."""
+    """Homogeneous ``(..., 4, 4)`` -> (translation ``(..., 3)``, quaternion ``(..., 4)`` x, y, z, w), the quaternion
+    signed canonically (w > 0, or at a half turn the first non-zero of x, y, z positive), as messages carry it."""
     transform = np.asarray(transform, dtype=np.float64)
-    return transform[..., :3, 3].copy(), matrix_to_quaternion(transform[..., :3, :3])
+    rotation = Rotation.from_matrix(transform[..., :3, :3].reshape(-1, 3, 3))
+    return transform[..., :3, 3].copy(), rotation.as_quat(canonical=True).reshape(transform.shape[:-2] + (4,))
 
 
 def invert_transform(transform: np.ndarray) -> np.ndarray:
@@ -94,28 +47,16 @@ def invert_transform(transform: np.ndarray) -> np.ndarray:
     return out
 
 
-def slerp(q0: np.ndarray, q1: np.ndarray, weight: float) -> np.ndarray:
-    """Spherical linear interpolation of unit quaternions (4,) along the shorter arc; weight 0 -> q0, 1 -> q1."""
-    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
-    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
-    dot = float(np.dot(q0, q1))
-    if dot < 0.0:
-        q1, dot = -q1, -dot
-    if dot > 1.0 - 1e-10:
-        q = q0 + weight * (q1 - q0)
-        return q / np.linalg.norm(q)
-    angle = np.arccos(dot)
-    return (np.sin((1.0 - weight) * angle) * q0 + np.sin(weight * angle) * q1) / np.sin(angle)
-
-
 def interpolate_transform(
     stamp0: int, translation0: np.ndarray, quaternion0: np.ndarray,
     stamp1: int, translation1: np.ndarray, quaternion1: np.ndarray, stamp: int,
 ) -> np.ndarray:
-    """Transform (4, 4) at ``stamp`` between two samples: lerp of the translation, slerp of the rotation."""
+    """Transform (4, 4) at ``stamp`` between two samples: lerp of the translation, slerp of the rotation (the
+    shorter arc)."""
     weight = 0.0 if stamp1 == stamp0 else (stamp - stamp0) / (stamp1 - stamp0)
     translation = (1.0 - weight) * np.asarray(translation0) + weight * np.asarray(translation1)
-    return rigid_transform(translation, slerp(quaternion0, quaternion1, weight))
+    rotation = Slerp([0.0, 1.0], Rotation.from_quat([quaternion0, quaternion1]))(weight)
+    return rigid_transform(translation, rotation.as_quat())
 
 
 @dataclass

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 
 from idpose_core.baselines import BASELINES
+from idpose_core.devices import DEVICE_CHOICES
 from idpose_core.evaluation.picks import PICK_SIZE
 from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.gravity import rotation_from_extrinsic
@@ -27,7 +28,7 @@ def add_estimator_arguments(parser: argparse.ArgumentParser, preset: str = Estim
                        help="offline: solver in this process; replay: through the estimator node over ROS")
     group.add_argument("--model-path", default=default.model_path,
                        help="Zero-1-to-3 diffusers folder or .ckpt (default: the embedded demo model)")
-    group.add_argument("--device", choices=("auto", "cpu", "cuda"), default=default.device)
+    group.add_argument("--device", choices=DEVICE_CHOICES, default=default.device)
     group.add_argument("--precision", choices=tuple(PRECISIONS), default=default.precision)
     group.add_argument("--preset", choices=tuple(PRESETS), default=preset, help=f"solver preset ({preset})")
     group.add_argument("--variant", choices=VARIANTS, default=default.variant, help="solver variant")

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -15,7 +14,7 @@ from geometry_msgs.msg import Pose
 from std_msgs.msg import Header
 
 from idpose_core.evaluation.estimator import ViewSetEstimate
-from idpose_core.pipeline import PipelineResult, ViewReport
+from idpose_core.pipeline import PipelineResult, ViewReport, estimate_details
 from idpose_interfaces.action import EstimatePoses
 from idpose_interfaces.msg import SolverStage, ViewEstimate
 from msg_adapters import matrix_to_pose, pose_to_matrix, poses_to_pose_array
@@ -81,11 +80,9 @@ def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
     views = [ViewReport(view.mask_method, view.mask_note, _none_if_nan(view.roll_deg), _none_if_nan(view.polar_deg),
                         _none_if_nan(view.object_distance), touches_border=view.touches_border,
                         reliable=view.reliable) for view in result.views]
-    return {"views": [asdict(view) for view in views], "anchor_polar_deg": result.anchor_polar_deg,
-            "polar_source": result.anchor_polar_source, "object_distance": result.object_distance,
-            "distance_source": result.distance_source, "forward_samples": result.forward_samples,
-            "backward_samples": result.backward_samples,
-            "stage_samples": {stage.name: [stage.forward_samples, stage.backward_samples] for stage in result.stages}}
+    return estimate_details(views, result.anchor_polar_deg, result.anchor_polar_source, result.object_distance,
+                            result.distance_source, result.forward_samples, result.backward_samples,
+                            {stage.name: (stage.forward_samples, stage.backward_samples) for stage in result.stages})
 
 
 def view_set_estimate(result: EstimatePoses.Result) -> ViewSetEstimate:

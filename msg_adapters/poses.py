@@ -1,10 +1,10 @@
 """4x4 rigid transforms <-> geometry_msgs Pose and PoseArray."""
 import numpy as np
 from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion
+from scipy.spatial.transform import Rotation
 
 from msg_adapters.errors import AdapterError
 from msg_adapters.headers import make_header
-from msg_adapters.quaternions import quaternion_to_rotation, rotation_to_quaternion
 
 # Tolerance on orthonormality and the bottom row: accepts transforms computed in float32.
 RIGID_TOLERANCE = 1e-5
@@ -38,9 +38,10 @@ def check_rigid(transform, name: str = "T") -> np.ndarray:
 
 
 def matrix_to_pose(transform) -> Pose:
-    """(4, 4) rigid transform -> Pose with a unit quaternion, w >= 0."""
+    """(4, 4) rigid transform -> Pose with a unit quaternion, signed canonically (w > 0, or at a half turn the first
+    non-zero of x, y, z positive)."""
     matrix = check_rigid(transform)
-    x, y, z, w = rotation_to_quaternion(matrix[:3, :3])
+    x, y, z, w = Rotation.from_matrix(matrix[:3, :3]).as_quat(canonical=True)
     tx, ty, tz = matrix[:3, 3]
     return Pose(position=Point(x=tx, y=ty, z=tz), orientation=Quaternion(x=x, y=y, z=z, w=w))
 
@@ -56,7 +57,7 @@ def pose_to_matrix(pose: Pose) -> np.ndarray:
     if np.linalg.norm(quaternion) < 1e-12:
         raise AdapterError("Pose.orientation has zero norm; expected a unit quaternion (x, y, z, w)")
     matrix = np.eye(4)
-    matrix[:3, :3] = quaternion_to_rotation(quaternion)
+    matrix[:3, :3] = Rotation.from_quat(quaternion).as_matrix()
     matrix[:3, 3] = translation
     return matrix
 

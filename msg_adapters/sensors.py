@@ -1,10 +1,10 @@
 """What the robot knows about a view, from its messages: gravity (Imu) and the camera's orientation."""
 import numpy as np
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu
 
 from msg_adapters.errors import AdapterError
-from msg_adapters.quaternions import quaternion_to_rotation
 
 
 def imu_acceleration(msg: Imu) -> np.ndarray:
@@ -22,4 +22,4 @@ def orientation_rotation(msg: PoseStamped | QuaternionStamped) -> np.ndarray:
     quaternion = np.array([q.x, q.y, q.z, q.w], dtype=np.float64)
     if not np.all(np.isfinite(quaternion)) or np.linalg.norm(quaternion) < 1e-12:
         raise AdapterError(f"orientation {quaternion.tolist()} is not a rotation (x, y, z, w)")
-    return quaternion_to_rotation(quaternion)
+    return Rotation.from_quat(quaternion).as_matrix()

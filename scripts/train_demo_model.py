@@ -58,7 +58,7 @@ from idpose_core.demo_model.training_data import (
 )
 from idpose_core.metrics import random_pose_errors
 from idpose_core.synthetic.catalogue import CURVE_HELDOUT, heldout_objects, training_objects
-from idpose_core.synthetic.scenes import demo_objects
+from idpose_core.synthetic.scenes import CAMERA_POLAR_DEG, FOV_DEG, demo_objects
 
 GAP_TIMESTEPS = (400, 550, 700, 850)  # inside the default training range
 CHECK_AZIMUTHS = 12
@@ -443,7 +443,8 @@ def main() -> None:
         "data": {"objects": data.names(), "demo_share": args.demo_share,
                  "demo_views_per_object": data.demo.views_per_object,
                  "catalogue_views_per_object": data.catalogue.views_per_object,
-                 "heldout_views_per_object": data.novel.views_per_object, "polar_deg": [30, 150], "fov_deg": 60},
+                 "heldout_views_per_object": data.novel.views_per_object, "polar_deg": list(CAMERA_POLAR_DEG),
+                 "fov_deg": FOV_DEG},
         "steps": step, "batch": args.batch, "wall_minutes": round(elapsed / 60, 1), "budget_minutes": args.minutes,
         "finished": elapsed >= budget, "threads": args.threads, "loss_gap_by_t": gaps,
         "final_check": {"t": best_t, **final, "pairs": len(held_out.check["novel"].pose),

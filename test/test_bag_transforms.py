@@ -1,4 +1,5 @@
-"""The TF tree of idpose_core.transforms: quaternion maths, chained lookups, interpolation, errors."""
+"""The TF tree of idpose_core.transforms: transforms from quaternions and back, chained lookups, interpolation,
+errors."""
 import math
 
 import numpy as np
@@ -9,13 +10,12 @@ from hypothesis import strategies as st
 from idpose_core.transforms import (
     TransformBuffer,
     TransformLookupError,
+    interpolate_transform,
     invert_transform,
-    matrix_to_quaternion,
-    quaternion_to_matrix,
     rigid_transform,
-    slerp,
     split_transform,
 )
+from msg_adapters.poses import matrix_to_pose
 
 SECOND = 1_000_000_000
 
@@ -26,26 +26,39 @@ def z_rotation(angle: float) -> np.ndarray:
 
 
 def test_quarter_turn_about_z_maps_x_to_y():
-    rotation = quaternion_to_matrix(z_rotation(math.pi / 2))
+    rotation = rigid_transform([0.0, 0.0, 0.0], z_rotation(math.pi / 2))[:3, :3]
     np.testing.assert_allclose(rotation @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(rotation @ [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], atol=1e-12)
 
 
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda q: np.linalg.norm(q) > 1e-3))
-def test_quaternion_matrix_round_trip(q):
+def test_quaternion_transform_round_trip(q):
     q = np.asarray(q) / np.linalg.norm(q)
-    back = matrix_to_quaternion(quaternion_to_matrix(q))
-    assert back[3] >= 0
+    transform = rigid_transform([1.0, 2.0, 3.0], q)
+    translation, back = split_transform(transform)
+    assert back[3] >= 0 and translation.tolist() == [1.0, 2.0, 3.0]
     assert min(np.abs(back - q).max(), np.abs(back + q).max()) < 1e-9  # q and -q are the same rotation
-    rotation = quaternion_to_matrix(q)
+    rotation = transform[:3, :3]
     np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(rotation) == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("axis", [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (0, -1, 1), (-1, 0, 0), (1, -2, 3)])
+def test_a_half_turn_gets_the_quaternion_messages_carry(axis):
+    """At w = 0, q and -q are the same half turn: /tf maths and the message adapters pick the same sign."""
+    n = np.asarray(axis, float) / np.linalg.norm(axis)
+    half_turn = np.eye(4)
+    half_turn[:3, :3] = 2.0 * np.outer(n, n) - np.eye(3)
+    _, ours = split_transform(half_turn)
+    o = matrix_to_pose(half_turn).orientation
+    np.testing.assert_allclose(ours, [o.x, o.y, o.z, o.w], atol=1e-12)
+    assert ours[np.flatnonzero(np.abs(ours) > 1e-12)[0]] > 0
+
+
 def test_zero_quaternion_is_rejected():
-    with pytest.raises(ValueError, match="zero length"):
-        quaternion_to_matrix([0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="zero norm"):
+        rigid_transform([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0])
 
 
 def test_split_and_invert_transform():
@@ -55,13 +68,14 @@ def test_split_and_invert_transform():
     np.testing.assert_allclose(invert_transform(transform) @ transform, np.eye(4), atol=1e-12)
 
 
-def test_slerp_halfway_and_short_arc():
-    half = slerp(z_rotation(0.0), z_rotation(math.pi / 2), 0.5)
-    np.testing.assert_allclose(half, z_rotation(math.pi / 4), atol=1e-12)
-    # -q is the same rotation as q: slerp must take the short arc, not turn the long way round
-    flipped = slerp(z_rotation(0.0), -z_rotation(math.pi / 2), 0.5)
-    np.testing.assert_allclose(quaternion_to_matrix(flipped), quaternion_to_matrix(z_rotation(math.pi / 4)), atol=1e-12)
-    np.testing.assert_allclose(slerp(z_rotation(0.3), z_rotation(0.3), 0.4), z_rotation(0.3), atol=1e-12)
+def test_interpolation_halfway_takes_the_short_arc():
+    def halfway(q1: np.ndarray) -> np.ndarray:
+        return interpolate_transform(0, [0.0, 0.0, 0.0], z_rotation(0.0), 2, [2.0, 0.0, 0.0], q1, 1)
+
+    expected = rigid_transform([1.0, 0.0, 0.0], z_rotation(math.pi / 4))
+    np.testing.assert_allclose(halfway(z_rotation(math.pi / 2)), expected, atol=1e-12)
+    # -q is the same rotation as q: interpolation must take the short arc, not turn the long way round
+    np.testing.assert_allclose(halfway(-z_rotation(math.pi / 2)), expected, atol=1e-12)
 
 
 def chain_buffer() -> TransformBuffer:

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.unit_costs import PROBE_SAMPLES, UnitCosts, all_costs
+from bench.step_cost import ADJUSTED_CANDIDATES
+from bench.unit_costs import QUIET_REFERENCE, UnitCosts, all_costs
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,8 +34,8 @@ def test_every_kind_is_measured_in_every_precision(tiny_run):
         assert 0 < figures["run_peak_gb"] <= figures["peak_gb"]
     for precision in ("float32", "bfloat16"):
         adjust = report["median"][f"ours_adjust@{precision}"]
-        # one adjust step differentiates 20 candidates: per sample is the step's time over 20
-        assert adjust["per_sample_seconds"] == pytest.approx(adjust["seconds"] / 20, rel=1e-6)
+        # one adjust step differentiates the better half of the grid: per sample is the step's time over that
+        assert adjust["per_sample_seconds"] == pytest.approx(adjust["seconds"] / ADJUSTED_CANDIDATES, rel=1e-6)
         assert report["ratio_official_over_ours"][precision]["step_seconds"] == pytest.approx(
             report["median"]["official_step"]["seconds"] / report["median"][f"ours_step@{precision}"]["seconds"])
 
@@ -43,7 +44,8 @@ def test_projection_charges_each_kind_of_sample_its_own_unit(tiny_run):
     costs = UnitCosts.load(tiny_run, "seconds", "bfloat16")
     views, forward, backward, adjust = 2, 1000, 300, 200
     expected = (views * costs.encode_per_view + adjust * costs.ours_adjust_sample + 100 * costs.ours_step
-                + 700 * costs.ours_probe / PROBE_SAMPLES)
+                + 700 * costs.ours_probe / costs.probe_samples)
+    assert costs.probe_samples == json.loads(tiny_run.read_text())["setup"]["probe_batch"]
     assert costs.ours_seconds(views, forward, backward, adjust) == pytest.approx(expected)
     assert costs.official_seconds(3, 4) == pytest.approx(3 * costs.official_probe + 4 * costs.official_step)
 
@@ -55,8 +57,9 @@ def test_all_costs_gives_wall_cpu_and_reference_units_per_precision(tiny_run):
         assert set(units) == {"seconds", "cpu_seconds", "reference_seconds"}
     # the reference float32 step is the quiet reference figure; bfloat16 keeps its measured ratio to it
     reference, cpu = costs["bfloat16"]["reference_seconds"], costs["bfloat16"]["cpu_seconds"]
-    assert costs["float32"]["reference_seconds"].ours_step == pytest.approx(2.15)
-    assert reference.ours_step / 2.15 == pytest.approx(cpu.ours_step / costs["float32"]["cpu_seconds"].ours_step)
+    quiet_step = QUIET_REFERENCE["ours_step"]
+    assert costs["float32"]["reference_seconds"].ours_step == pytest.approx(quiet_step)
+    assert reference.ours_step / quiet_step == pytest.approx(cpu.ours_step / costs["float32"]["cpu_seconds"].ours_step)
 
 
 def test_a_precision_the_run_did_not_measure_is_named(tiny_run):

@@ -21,7 +21,13 @@ from tqdm import tqdm
 from idpose_core.demo_model.robot_crops import CropAugmentation, Tone, random_tone, robot_crop
 from idpose_core.preprocessing import PreprocessingError, check_object_mask, preprocess_views
 from idpose_core.spherical import relative
-from idpose_core.synthetic.scenes import ObjectSpec, SceneRenderer, random_camera_spheres, random_light
+from idpose_core.synthetic.scenes import (
+    CAMERA_POLAR_DEG,
+    ObjectSpec,
+    SceneRenderer,
+    random_camera_spheres,
+    random_light,
+)
 from idpose_core.view_input import ViewInput
 
 
@@ -57,7 +63,7 @@ class RenderedViews:
 
 
 def render_views(specs: Sequence[ObjectSpec], views_per_object: int, image_size: int, seed: int,
-                 polar_deg: tuple[float, float] = (30.0, 150.0)) -> RenderedViews:
+                 polar_deg: tuple[float, float] = CAMERA_POLAR_DEG) -> RenderedViews:
     """Render every object from its own ``views_per_object`` random cameras (seeded per object)."""
     rng = np.random.default_rng(seed)
     rgbs, masks, cameras = [], [], []

@@ -18,6 +18,12 @@ Progress = Callable[[str, int, int], None]
 SampleCount = Callable[[int, int], None]
 
 
+
+def diffusion_step(fraction: float, steps: int) -> int:
+    """A timestep given as a fraction of the schedule (``probe_t``, ``refine_t_range``) -> the model's step index
+    among ``steps``, the last at most."""
+    return min(int(round(fraction * steps)), steps - 1)
+
 class SolverContext:
     """Predictor, encoded views, seeded randomness, sample counters, progress and cancellation.
 
@@ -38,8 +44,8 @@ class SolverContext:
         self.dtype = views.latents.dtype
         self.generator = torch.Generator(device="cpu").manual_seed(config.seed)
         steps = predictor.num_train_timesteps
-        self.probe_t = min(int(round(config.probe_t * steps)), steps - 1)
-        self.refine_t = tuple(min(int(round(f * steps)), steps - 1) for f in config.refine_t_range)
+        self.probe_t = diffusion_step(config.probe_t, steps)
+        self.refine_t = tuple(diffusion_step(fraction, steps) for fraction in config.refine_t_range)
         self.probe_noise = self.draw_noise(config.probe_batch)
         self.stage_samples: dict[str, list[int]] = {}  # stage -> [evaluated, differentiated]
         self._progress = progress

@@ -27,6 +27,7 @@ from idpose_core.spherical import spherical_to_cartesian
 CAMERA_RADIUS = 2.0
 OBJECT_RADIUS = 0.9
 FOV_DEG = 60.0
+CAMERA_POLAR_DEG = (30.0, 150.0)  # the polar range random cameras are drawn from (0 = straight above)
 DATA_PATH = Path(pybullet_data.getDataPath())
 
 
@@ -243,7 +244,7 @@ class SceneRenderer(PybulletClient):
         return rgb, mask
 
 
-def random_camera_spheres(rng: np.random.Generator, n: int, polar_deg: tuple[float, float] = (30.0, 150.0),
+def random_camera_spheres(rng: np.random.Generator, n: int, polar_deg: tuple[float, float] = CAMERA_POLAR_DEG,
                           radius: float = CAMERA_RADIUS) -> np.ndarray:
     """``n`` cameras (n, 3) = (polar, azimuth, radius) radians, uniform on the sphere's polar band."""
     low, high = (math.radians(a) for a in polar_deg)

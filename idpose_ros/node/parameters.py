@@ -14,12 +14,15 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from idpose_core.devices import DEVICE_CHOICES
 from idpose_core.gravity import IMU_WINDOW_S, rotation_from_extrinsic
+from idpose_core.model_loading import PRECISIONS
 from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, MODEL_IMAGE_SIZE, PipelineSettings
 from idpose_core.solver import SolverConfig
-from idpose_core.solver.config import PRESETS
+from idpose_core.solver.config import KNOWN_POLAR_MODES, PRESETS, VARIANTS
 from idpose_core.stamps import INPUT_TOLERANCE_S
 from idpose_ros.node.input_sync import GRAVITY_MODES
+from idpose_ros.node.view_buffer import CAPTURE_MODES
 
 INT32_MAX = 2**31 - 1
 
@@ -38,11 +41,11 @@ class NodeSettings:
         "(a folder scripts/train_demo_model.py wrote is a demo model too)",
         read_only=True))
     device: str = field(default="auto", metadata=_spec(
-        "where the model runs (auto = cuda when available)", choices=("auto", "cpu", "cuda"), read_only=True))
+        "where the model runs (auto = cuda when available)", choices=DEVICE_CHOICES, read_only=True))
     precision: str = field(default="auto", metadata=_spec(
         "model dtype (auto = float32 on cpu, bfloat16 or float16 on cuda; bfloat16 on a cpu with avx512_bf16 "
         "or AMX is about twice as fast as float32)",
-        choices=("auto", "float32", "float16", "bfloat16"), read_only=True))
+        choices=tuple(PRECISIONS), read_only=True))
     load_model_at_startup: bool = field(default=True, metadata=_spec(
         "load the model at the lifecycle configure transition (false: on the first estimate)", read_only=True))
     autostart: bool = field(default=True, metadata=_spec(
@@ -50,7 +53,7 @@ class NodeSettings:
         "manager", read_only=True))
     capture_mode: str = field(default="auto", metadata=_spec(
         "auto: keep every image min_view_interval s after the last kept one; on_request: ~/capture keeps "
-        "the latest image", choices=("auto", "on_request")))
+        "the latest image", choices=CAPTURE_MODES))
     min_view_interval: float = field(default=1.0, metadata=_spec(
         "seconds between two views kept in auto capture mode", bounds=(0.0, 3600.0)))
     max_views: int = field(default=8, metadata=_spec(
@@ -110,7 +113,7 @@ class NodeSettings:
 
 SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
     "variant": _spec("multi-view solver: full (triangular exploration and refinement), tr (triangular "
-                     "refinement only) or naive (pairs independent)", choices=("full", "tr", "naive")),
+                     "refinement only) or naive (pairs independent)", choices=VARIANTS),
     "azimuth_candidates": _spec("azimuth candidates explored per view", bounds=(1, 360)),
     "probe_batch": _spec("noise samples per candidate probe", bounds=(1, 1024)),
     "adjust_steps": _spec("gradient steps on the better half of the candidates", bounds=(0, 10000)),
@@ -127,7 +130,7 @@ SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
                         "about 0.45 GB per sample for full-size Zero-1-to-3 in float32)", bounds=(1, 4096)),
     "seed": _spec("random seed of the solver's noise", bounds=(0, INT32_MAX)),
     "known_polar": _spec("views whose polar angle gravity gives: search azimuth only and keep that angle (fixed) "
-                         "or let refinement move it (start)", choices=("fixed", "start")),
+                         "or let refinement move it (start)", choices=KNOWN_POLAR_MODES),
 }
 
 

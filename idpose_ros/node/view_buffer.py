@@ -27,6 +27,9 @@ class View:
     received: ViewMessages | None = None  # the messages it was made from, kept while the node records
 
 
+CAPTURE_MODES = ("auto", "on_request")  # keep views on a timer, or on ~/capture
+
+
 class CaptureRefused(Exception):
     """A view could not be kept; the message says why (buffer full, no new image, ...)."""
 
