@@ -26,7 +26,7 @@ setup(
     license="MIT",
     entry_points={
         "console_scripts": [
-            "estimator = idpose_ros.node.estimator_node:main",
+            "estimator = idpose_ros.node.process:main",
             "evaluate_bag = idpose_ros.evaluate_bag:main",
             "evaluate_dataset = idpose_ros.evaluate_dataset:main",
             "make_synthetic_bag = idpose_ros.make_synthetic_bag:main",

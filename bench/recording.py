@@ -98,7 +98,7 @@ def soak(seconds: float, rate: float, interval: float, max_bytes: int) -> None:
     env.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
     os.environ.update(env)
     folder = Path(tempfile.mkdtemp(prefix="idpose_soak_"))
-    node = subprocess.Popen([sys.executable, "-m", "idpose_ros.node.estimator_node", "--ros-args",
+    node = subprocess.Popen([sys.executable, "-m", "idpose_ros.node.process", "--ros-args",
                              "-r", "__ns:=/soak", "-p", f"record_dir:={folder}", "-p", f"record_max_bytes:={max_bytes}",
                              "-p", f"min_view_interval:={interval}", "-p", "max_views:=8"],
                             cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -37,7 +37,7 @@ def test_the_launch_file_starts_the_installed_estimator():
     module = tree()
     constants = module_constants(module)
     (node,) = calls(module, "Node")
-    console_scripts = re.findall(r'"(\w+) = idpose_ros\.node\.estimator_node:main"', (ROOT / "setup.py").read_text())
+    console_scripts = re.findall(r'"(\w+) = idpose_ros\.node\.process:main"', (ROOT / "setup.py").read_text())
     assert keyword(node, "package", constants) == "idpose_ros"
     assert [keyword(node, "executable", constants)] == console_scripts == ["estimator"]
     node_source = (ROOT / "idpose_ros" / "node" / "estimator_node.py").read_text()

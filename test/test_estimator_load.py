@@ -1,6 +1,6 @@
 """The estimator under load and hostile input, in a process of its own: service bursts, a decompression bomb, HD video.
 
-The node runs as `python -m idpose_ros.node.estimator_node` with the Fast DDS profile the launch file
+The node runs as `python -m idpose_ros.node.process` with the Fast DDS profile the launch file
 sets (config/fastdds_large_images.xml), and so does the process that streams raw 1080p frames to
 it (bench/image_transport.py): the profile is read when a process creates its first participant,
 so it cannot be applied to this test's own process afterwards. The node's memory is read from
@@ -52,7 +52,7 @@ class Estimator:
         arguments = [f"{name}:={value}" for name, value in {**FAST, **parameters}.items()]
         with log.open("w") as output:
             self.process = subprocess.Popen(
-                [sys.executable, "-m", "idpose_ros.node.estimator_node", "--ros-args", "-r", f"__ns:={namespace}",
+                [sys.executable, "-m", "idpose_ros.node.process", "--ros-args", "-r", f"__ns:={namespace}",
                  *[item for argument in arguments for item in ("-p", argument)]],
                 cwd=ROOT, stdout=output, stderr=subprocess.STDOUT,
                 env={**os.environ, **PROFILE, "PYTHONPATH": str(ROOT)})

@@ -34,8 +34,9 @@ from visualization_msgs.msg import MarkerArray
 
 from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import ViewInput, estimate_view_poses
-from idpose_ros.node.estimator_node import RESULT_QOS, EstimatorNode
+from idpose_ros.node.estimator_node import EstimatorNode
 from idpose_ros.node.parameters import current_values, pipeline_settings
+from idpose_ros.node.result_publisher import RESULT_QOS
 from msg_adapters import array_to_image, compressed_to_rgb, image_to_rgb, pose_to_matrix
 
 TIMEOUT = 60.0
@@ -361,12 +362,12 @@ def test_gravity_required_refuses_a_view_without_it_and_late_depth_is_attached(h
     assert not refused.success and "no Imu or orientation message received; gravity: required" in refused.message
     level = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)  # an optical frame whose z is up: looking straight up
     orientation.publish(QuaternionStamped(header=header("base", 20), quaternion=level))
-    h.wait_for(lambda: h.node._sync.live(h.node.get_clock().now().nanoseconds) >= {"orientation"},
+    h.wait_for(lambda: h.node._intake.sync.live(h.node.get_clock().now().nanoseconds) >= {"orientation"},
                "the orientation to arrive")
     far = latest(array_to_image(np.dstack([rgb, alpha]), "rgba8", header("cam", 21)))
     assert not far.success and "no orientation within 0.02 s of the image stamp" in far.message
     depth.publish(array_to_image(np.full((64, 64), 500, np.uint16), "16UC1", header("cam", 30)))
-    h.wait_for(lambda: "depth" in h.node._sync.live(h.node.get_clock().now().nanoseconds), "a depth image")
+    h.wait_for(lambda: "depth" in h.node._intake.sync.live(h.node.get_clock().now().nanoseconds), "a depth image")
     orientation.publish(QuaternionStamped(header=header("base", 40), quaternion=level))
     kept = latest(array_to_image(np.dstack([rgb, alpha]), "rgba8", header("cam", 40)))
     assert kept.success and kept.message == "captured view 1 (Image rgba8, with gravity, depth pending)"

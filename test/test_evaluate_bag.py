@@ -20,13 +20,13 @@ from idpose_core.solver import SolverConfig
 from idpose_core.synthetic.render_oracle import IdentifyingOracle
 from idpose_core.synthetic.scenes import demo_objects, random_camera_spheres
 from idpose_ros import evaluate_bag
+from idpose_ros.cli_options import estimator_options, ground_truth_options
 from idpose_ros.dataset.synthetic_bag import IMAGE_TOPIC, POSE_TOPIC, SyntheticBagOptions, make_bag
 from idpose_ros.evaluation import bag_evaluation, estimators
 from idpose_ros.evaluation.bag_io import TYPESTORE, BagWriter
 from idpose_ros.evaluation.bag_report import border_views, picks_sentence, write_report
 from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
-from idpose_ros.node import estimator_node
 
 SEED, VIEWS, SIZE = 5, 10, 64
 ORACLE_SOLVER = ("adjust_lr=1.0", "refine_lr=0.1", "refine_steps_per_view=30")
@@ -150,20 +150,25 @@ def test_node_values_follow_the_node_parameters():
         node_values("default", None, [], image_size=4)
 
 
-def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle, monkeypatch):
-    """The command in both modes on the same seed; replay goes through a real estimator node over ROS.
+def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle):
+    """The command's options in both modes on the same seed; replay goes through a real estimator node over ROS.
 
-    The model loader of both paths is swapped for the oracle fixture (no real model is fast here);
-    the EstimatePoses action and its result are the node's own.
+    Both paths are handed the oracle fixture as their model (no real model is fast here); the EstimatePoses
+    action and its result are the node's own.
     """
-    monkeypatch.setattr(estimators, "load_predictor", lambda *args, **kwargs: oracle)
-    monkeypatch.setattr(estimator_node, "load_predictor", lambda *args, **kwargs: oracle)
     common = [str(demo_bag), "--samples", "1", "--seed", "1", "--n", "2", "4", "--preset", "fast", "--device", "cpu",
               "--image-size", "128"]
     common += [x for item in ORACLE_SOLVER for x in ("--solver-param", item)]
     reports = {}
     for mode in ("offline", "replay"):
-        assert evaluate_bag.main([*common, "--mode", mode, "--out", str(tmp_path / mode)]) == 0
+        args, protocol = evaluate_bag.parse_args([*common, "--mode", mode, "--out", str(tmp_path / mode)])
+        estimator = estimators.make_estimator(estimator_options(args), predictor=oracle)
+        try:
+            run = bag_evaluation.evaluate_bag(args.bag, estimator, ground_truth_options(args), protocol,
+                                              show_progress=False)
+        finally:
+            estimator.close()
+        write_report(args.out, run)
         reports[mode] = json.loads((tmp_path / mode / "report.json").read_text())
     offline, replay = reports["offline"], reports["replay"]
     assert replay["mode"] == "replay" and offline["picks"] == replay["picks"]

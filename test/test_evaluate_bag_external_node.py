@@ -30,7 +30,7 @@ TINY_SOLVER = ["azimuth_candidates=2", "probe_batch=1", "adjust_steps=0", "keep_
 def running_node(tiny_model_dir, wait_for):
     """The estimator in a subprocess, in a namespace of its own; yields its fully qualified name."""
     process = subprocess.Popen(
-        [sys.executable, "-m", "idpose_ros.node.estimator_node", "--ros-args", "-r", f"__ns:={NAMESPACE}",
+        [sys.executable, "-m", "idpose_ros.node.process", "--ros-args", "-r", f"__ns:={NAMESPACE}",
          "-p", f"model_path:={tiny_model_dir}", "-p", "device:=cpu", "-p", "diagnostics_period:=0.2"],
         stderr=subprocess.PIPE, text=True)
     lines: list[str] = []

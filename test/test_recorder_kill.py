@@ -1,6 +1,6 @@
 """The flight recorder against a real kill: the node as a subprocess, SIGKILLed after 3 captures, restarted.
 
-The node (``python -m idpose_ros.node.estimator_node``, the tiny random Zero-1-to-3 and the reduced
+The node (``python -m idpose_ros.node.process``, the tiny random Zero-1-to-3 and the reduced
 solver of test_estimator_node.py) keeps 3 views on ``~/capture`` and estimates them; then it is killed
 with SIGKILL and started again on the same ``record_dir``. It says in its log and on /diagnostics that
 it resumed the 3 views, and its estimate of them gives the same poses, to the bit, as before the kill
@@ -26,7 +26,7 @@ from std_srvs.srv import Trigger
 from test_estimator_node import FAST_SOLVER, header
 
 from idpose_ros.node.diagnostics import STATUS_NAME
-from idpose_ros.node.estimator_node import RESULT_QOS
+from idpose_ros.node.result_publisher import RESULT_QOS
 from idpose_ros.recording.log_format import read_recording
 from msg_adapters import array_to_image, pose_to_matrix
 
@@ -40,7 +40,7 @@ class NodeProcess:
     def __init__(self, context, wait_for, namespace: str, log: Path, parameters: dict, limit_bytes: int = 0) -> None:
         self.namespace, self.log, self.wait_for = namespace, log, wait_for
         arguments = [f"{name}:={value}" for name, value in parameters.items()]
-        command = [sys.executable, "-m", "idpose_ros.node.estimator_node", "--ros-args", "-r", f"__ns:={namespace}",
+        command = [sys.executable, "-m", "idpose_ros.node.process", "--ros-args", "-r", f"__ns:={namespace}",
                    *[item for argument in arguments for item in ("-p", argument)]]
 
         def limit() -> None:  # a disk that fills up after limit_bytes (Python ignores SIGXFSZ: writes fail)

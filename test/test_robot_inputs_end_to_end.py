@@ -23,7 +23,6 @@ from idpose_ros.evaluation.bag_evaluation import evaluate_bag
 from idpose_ros.evaluation.bag_views import ExtraTopics
 from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions
-from idpose_ros.node import estimator_node
 
 SEED, VIEWS, SIZE, ROLL_DEG = 11, 6, 96, 40.0
 ORACLE = EstimatorOptions(preset="fast", image_size=96,
@@ -87,16 +86,14 @@ def test_a_tabletop_bag_is_cut_out_and_scaled_by_depth(tmp_path):
     assert {view["mask_method"] for view in without.estimates[0]["details"]["views"]} <= {"threshold", "grabcut"}
 
 
-def test_replay_reads_the_same_gravity_as_offline(rolled_bag, monkeypatch):
+def test_replay_reads_the_same_gravity_as_offline(rolled_bag):
     """The node gets each view's gravity on its camera_orientation topic from the replay client."""
     oracle = oracle_for(SEED, SIZE)
-    monkeypatch.setattr(estimators, "load_predictor", lambda *args, **kwargs: oracle)
-    monkeypatch.setattr(estimator_node, "load_predictor", lambda *args, **kwargs: oracle)
     options = GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
     protocol = EvaluationProtocol(1, SEED, (3,))
     runs = {}
     for mode in ("offline", "replay"):
-        estimator = estimators.make_estimator(replace(ORACLE, mode=mode))
+        estimator = estimators.make_estimator(replace(ORACLE, mode=mode), predictor=oracle)
         try:
             runs[mode] = evaluate_bag(rolled_bag, estimator, options, protocol, show_progress=False)
         finally:

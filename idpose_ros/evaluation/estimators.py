@@ -97,18 +97,19 @@ class OfflineEstimator:
         """Nothing to release: the model goes with the object."""
 
 
-def make_estimator(options: EstimatorOptions) -> ViewSetEstimator:
-    """The offline estimator (model loaded here, once) or the replay client (model loaded by the node).
+def make_estimator(options: EstimatorOptions, predictor: NoisePredictor | None = None) -> ViewSetEstimator:
+    """The offline estimator (model loaded here, once) or the replay client (model loaded by the node);
+    ``predictor``, when given, is the model either runs instead of loading the one the options name.
 
     Raises ValueError for bad options, ``ModelLoadError`` and ``ReplayError``.
     """
     values = options.node_values()
     model = {"model_path": options.model_path, "device": options.device, "precision": options.precision}
     if options.mode == "offline":
-        return OfflineEstimator(load_predictor(options.model_path, options.device, options.precision), values,
-                                model, options.preset)
+        predictor = predictor or load_predictor(options.model_path, options.device, options.precision)
+        return OfflineEstimator(predictor, values, model, options.preset)
     if options.mode == "replay":
         return ReplayEstimator(values, preset=options.preset, node_name=options.node, timeout=options.timeout,
-                               **model)
+                               predictor=predictor, **model)
     raise ValueError(f"mode must be one of {', '.join(MODES)}, got {options.mode!r}")
 

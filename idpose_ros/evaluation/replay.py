@@ -29,11 +29,12 @@ from std_msgs.msg import Header
 
 from idpose_core.evaluation.estimator import ViewSetEstimate
 from idpose_core.gravity import level_from_optical
+from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.solver import Progress
 from idpose_core.view_input import ViewInput
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.estimate_result import view_set_estimate
-from idpose_ros.node.estimator_node import NODE_NAME, SERVICE_QOS, EstimatorNode
+from idpose_ros.node.estimator_node import NODE_NAME, SERVICE_QOS, EstimatorNode, load_configured_predictor
 from idpose_ros.view_decoding import ViewMessages, encode_view
 from msg_adapters import matrix_to_pose
 
@@ -65,8 +66,9 @@ class ReplayEstimator:
 
     def __init__(self, values: dict[str, Any], model_path: str = "", device: str = "auto",
                  precision: str = "auto", node_name: str | None = None, timeout: float = 3600.0,
-                 preset: str = "default"):
-        """``values``: the node parameters every estimate runs on (``preset`` names where they came from)."""
+                 preset: str = "default", predictor: NoisePredictor | None = None):
+        """``values``: the node parameters every estimate runs on (``preset`` names where they came from);
+        ``predictor``: the model a node started here runs, instead of the one the model parameters name."""
         self.values, self.timeout = values, timeout
         self._context = rclpy.Context()
         rclpy.init(context=self._context)
@@ -76,7 +78,8 @@ class ReplayEstimator:
             namespace = f"/idpose_evaluate_bag_{os.getpid()}"
             # warnings and errors only, from its first line on: the terminal belongs to the progress bar
             set_logger_level(f"{namespace[1:]}.{NODE_NAME}", LoggingSeverity.WARN)
-            self._estimator = EstimatorNode(context=self._context, namespace=namespace, parameter_overrides=[
+            factory = load_configured_predictor if predictor is None else lambda settings: predictor
+            self._estimator = EstimatorNode(factory, context=self._context, namespace=namespace, parameter_overrides=[
                 Parameter("model_path", value=model_path), Parameter("device", value=device),
                 Parameter("precision", value=precision), Parameter("publish_tf", value=False)])
             self._executor.add_node(self._estimator)

@@ -9,15 +9,14 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from idpose_core.pipeline import PipelineResult
 
 STATUS_NAME = "idpose_estimator: estimation"
-RUNNING_STATES = ("estimating", "cancelling")  # a run is still on the worker: no new one can start
 
 
 @dataclass(frozen=True)
 class EstimatorStatus:
-    """What the node reports: ``lifecycle`` its lifecycle state; ``state`` is idle, estimating, cancelling (a
-    cancelled estimate is stopping) or failed; ``run_id`` numbers the running or the last estimate (0 before
-    the first), as ``~/estimate`` answered it; ``model`` as ``ModelHolder.describe``; ``images_received``
-    counts every image message."""
+    """What the node reports: ``lifecycle`` its lifecycle state; ``state`` a ``RunPhase`` value: idle,
+    estimating, cancelling (a cancelled estimate is stopping) or failed; ``run_id`` numbers the running or the
+    last estimate (0 before the first), as ``~/estimate`` answered it; ``model`` as ``ModelHolder.describe``;
+    ``images_received`` counts every image message."""
 
     state: str
     run_id: int

@@ -1,0 +1,40 @@
+"""Where an estimate's result goes: ``~/poses``, ``~/markers``, ``~/views`` (latched) and, when on, TF."""
+from __future__ import annotations
+
+from geometry_msgs.msg import PoseArray
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image
+from visualization_msgs.msg import MarkerArray
+
+from idpose_core.pipeline import PipelineResult, views_mosaic
+from idpose_interfaces.action import EstimatePoses
+from idpose_ros.node.tf_broadcast import PoseBroadcaster
+from msg_adapters import array_to_image, camera_markers
+
+MARKER_DEPTH = 0.15  # frustum depth as a share of object_distance
+# Reliable and latched: a subscriber that joins late still gets the last result.
+RESULT_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class ResultPublisher:
+    """The node's result topics, and TF when ``publish_tf``."""
+
+    def __init__(self, node: Node, publish_tf: bool) -> None:
+        self._poses = node.create_publisher(PoseArray, "~/poses", RESULT_QOS)
+        self._markers = node.create_publisher(MarkerArray, "~/markers", RESULT_QOS)
+        self._views = node.create_publisher(Image, "~/views", RESULT_QOS)
+        self._tf = PoseBroadcaster(node, node.get_logger().warning) if publish_tf else None
+
+    def publish(self, result: PipelineResult, message: EstimatePoses.Result, tf_prefix: str) -> None:
+        """Poses (the result's own PoseArray), markers, the views the model saw and TF; the markers are sized by
+        the distance the poses use (measured from depth when the anchor had it)."""
+        poses = message.poses
+        self._poses.publish(poses)
+        self._markers.publish(camera_markers(result.poses, poses.header.frame_id, poses.header.stamp,
+                                             depth=MARKER_DEPTH * result.object_distance))
+        mosaic = array_to_image(views_mosaic(result.preprocessed.images), "rgb8")
+        mosaic.header = poses.header
+        self._views.publish(mosaic)
+        if self._tf is not None:
+            self._tf.broadcast(poses, tf_prefix)
