@@ -122,14 +122,14 @@ def ros_context():
     rclpy.shutdown(context=context)
 
 
-def poll_until(predicate: Callable[[], Any], what: str, timeout: float = 60.0) -> Any:
-    """Poll ``predicate`` every 20 ms until it returns something truthy (returned); fails naming ``what``."""
+def poll_until(predicate: Callable[[], Any], what: str, timeout: float = 60.0, poll: float = 0.02) -> Any:
+    """Poll ``predicate`` every ``poll`` s until it returns something truthy (returned); fails naming ``what``."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         value = predicate()
         if value:
             return value
-        time.sleep(0.02)
+        time.sleep(poll)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
