@@ -31,6 +31,7 @@ setup(
             "evaluate_dataset = idpose_ros.evaluate_dataset:main",
             "make_synthetic_bag = idpose_ros.make_synthetic_bag:main",
             "demo = idpose_ros.demo:main",
+            "seal_recording = idpose_ros.seal_recording:main",
         ],
     },
 )

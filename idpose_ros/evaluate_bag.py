@@ -38,9 +38,10 @@ from idpose_ros.evaluation.bag_io import BagError
 from idpose_ros.evaluation.bag_report import write_report
 from idpose_ros.evaluation.estimators import make_estimator
 from idpose_ros.evaluation.ground_truth import read_views, require_usable, skipped_note
-from idpose_ros.evaluation.recording import evaluate_recording, is_recording
+from idpose_ros.evaluation.recording import evaluate_recording
 from idpose_ros.evaluation.replay import ReplayError
 from idpose_ros.evaluation.view_masks import check_save_views
+from idpose_ros.recording.log_format import is_recording
 
 
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationProtocol]:

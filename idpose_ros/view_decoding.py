@@ -1,11 +1,14 @@
 """A view's messages -> the pipeline's ``ViewInput``: image, depth, mask and intrinsics decoded by msg_adapters.
 
-The node and the bag readers both go through these functions, so a view means the same to both;
-``view_messages`` goes the other way, for a client that sends decoded views to the node.
+The node and the bag readers both go through these functions, so a view means the same to both. A view read
+from a bag keeps its messages (``MessageView``), so that a replay sends them as recorded (``restamped``);
+``encode_view`` goes the other way, for a client that has only decoded views.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -72,6 +75,27 @@ def with_inputs(view: ViewInput, depth: Image | None = None, mask: Image | None 
     if roi is not None:
         changes["roi"] = roi
     return replace(view, **changes)
+
+
+@dataclass(frozen=True)
+class MessageView(ViewInput):
+    """A view decoded from messages, with the messages themselves: what a replay sends to the node as recorded."""
+
+    messages: ViewMessages | None = None
+
+
+def restamped(view: ViewMessages, stamp: Time, frame_id: str) -> ViewMessages:
+    """The view's messages as recorded (encodings, compression, data shared), each with a new header: ``stamp``
+    in ``frame_id``."""
+    def with_header(message: Any) -> Any:
+        if message is None:
+            return None
+        fresh = copy.copy(message)  # shallow: the header would be shared, so it is replaced, not changed
+        fresh.header = Header(stamp=stamp, frame_id=frame_id)
+        return fresh
+
+    return replace(view, image=with_header(view.image), depth=with_header(view.depth),
+                   mask=with_header(view.mask), camera_info=with_header(view.camera_info))
 
 
 def decode_view(image: Image | CompressedImage, depth: Image | None = None, mask: Image | None = None,

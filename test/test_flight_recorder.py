@@ -8,6 +8,7 @@ message, or inside the record being written.
 from __future__ import annotations
 
 import os
+import re
 import threading
 from pathlib import Path
 
@@ -19,7 +20,8 @@ from sensor_msgs.msg import Imu
 
 from idpose_core.view_input import ViewInput
 from idpose_interfaces.action import EstimatePoses
-from idpose_ros.evaluation.bag_io import TYPESTORE, BagWriter, open_bag
+from idpose_ros import seal_recording
+from idpose_ros.evaluation.bag_io import TYPESTORE, BagError, BagWriter, open_bag
 from idpose_ros.node.flight_recorder import REFUSED_SUFFIX, FlightRecorder, restored_view
 from idpose_ros.recording.log_format import IMAGE_TOPIC, read_recording
 from idpose_ros.recording.mcap_log import RecordingUnreadable, seal_mcap
@@ -182,6 +184,34 @@ def test_seal_keeps_every_whole_message(tmp_path):
     assert not recording.scan.sealed and recording.scan.cut_bytes == 0 and len(recording.buffered) == 2
     seal_mcap(path, recording.scan)
     assert len(read_recording(path).buffered) == 2
+
+
+def test_seal_recording_makes_a_killed_file_readable_without_the_node_and_leaves_a_live_one(tmp_path, capsys):
+    killed = Node(tmp_path / "killed")
+    for seed in range(2):
+        killed.keep(view_messages(seed, with_gravity=False))
+    path = files(tmp_path / "killed")[0]
+    whole = path.stat().st_size
+    killed.keep(view_messages(2, with_gravity=False))
+    killed.recorder._writer.abandon()  # the process dies: its lock goes with it
+    with open(path, "r+b") as stream:
+        stream.truncate(whole + SIZE * SIZE)  # the third image cut in half
+    with pytest.raises(BagError, match="not a readable rosbag2 bag: File end magic is invalid"), open_bag(path):
+        pass
+    live = Node(tmp_path / "live")
+    live.keep(view_messages(0, with_gravity=False))
+
+    assert seal_recording.main([str(tmp_path / "killed"), str(tmp_path / "live")]) == 0
+    printed = capsys.readouterr().out
+    assert re.search(rf"{re.escape(str(path))}: sealed \(\d+ messages kept, dropping the \d+ bytes of a", printed)
+    assert f"{files(tmp_path / 'live')[0]}: in use (" in printed and "running node" in printed
+    with open_bag(path) as reader:  # rosbags reads it now: the two whole views
+        assert reader.topics[IMAGE_TOPIC].msgcount == 2
+    assert not read_recording(files(tmp_path / "live")[0]).scan.sealed, "a live node's file is left alone"
+    assert seal_recording.main([str(path)]) == 0 and ": whole" in capsys.readouterr().out
+    live.recorder.close()
+    assert seal_recording.main([str(tmp_path / "absent")]) == 2
+    assert "no such file or folder" in capsys.readouterr().err
 
 
 def test_keeping_a_view_does_not_wait_for_the_disk_and_flush_does(tmp_path):

@@ -21,12 +21,12 @@ import numpy as np
 
 from idpose_core.evaluation.protocol import EstimateTask, EvaluationProtocol, tasks_for_picks
 from idpose_core.view_input import ViewInput
-from idpose_ros.dataset.recording_input import RecordingInput, recordings_in
+from idpose_ros.dataset.recording_input import RecordingInput
 from idpose_ros.evaluation.bag_evaluation import plan_bag
 from idpose_ros.evaluation.bag_io import BagError
 from idpose_ros.evaluation.bag_views import BagViews, load_views
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views, require_usable
-from idpose_ros.evaluation.recording import is_recording
+from idpose_ros.recording.log_format import is_recording, recordings_in
 
 PNG_TO_RGB = {1: cv2.COLOR_GRAY2RGB, 3: cv2.COLOR_BGR2RGB, 4: cv2.COLOR_BGRA2RGB}
 

@@ -15,12 +15,7 @@ from idpose_core.evaluation.protocol import EstimateTask, EvaluationProtocol
 from idpose_core.view_input import ViewInput
 from idpose_ros.evaluation.bag_views import load_views
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions
-from idpose_ros.evaluation.recording import LIVE_METHOD, RecordedEstimates, is_recording, live_outcome, open_recording
-
-
-def recordings_in(folder: Path) -> list[Path]:
-    """The flight recordings under ``folder`` (any depth: a record_dir, or a folder of them), sorted by path."""
-    return sorted(path for path in Path(folder).rglob("*.mcap") if is_recording(path))
+from idpose_ros.evaluation.recording import LIVE_METHOD, RecordedEstimates, live_outcome, open_recording
 
 
 class RecordingInput:

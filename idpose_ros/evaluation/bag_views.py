@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ from idpose_core.stamps import INPUT_TOLERANCE_S, match_stamps
 from idpose_core.transforms import TransformBuffer, TransformLookupError
 from idpose_core.view_input import ViewInput
 from idpose_ros.evaluation.bag_io import BagError, open_bag, topic_connections
-from idpose_ros.view_decoding import ViewMessages, decode_view
+from idpose_ros.view_decoding import MessageView, ViewMessages, decode_view
 from msg_adapters import (
     AdapterError,
     check_image,
@@ -315,12 +315,15 @@ def _read_view_messages(path: str | Path, image_topic: str, view_ids: set[int], 
 
 def load_views(path: str | Path, image_topic: str, view_ids: set[int], bag: BagViews,
                extras: ExtraTopics = ExtraTopics()) -> tuple[dict[int, ViewInput], dict[int, str]]:
-    """The chosen usable views decoded, once each, with their other inputs (as ``bag.extras`` matched them); and
-    why any of them could not be decoded (view id -> reason), so that only the estimates holding it fail."""
+    """The chosen usable views decoded, once each, with their other inputs (as ``bag.extras`` matched them) and the
+    messages they came from (``MessageView``); and why any of them could not be decoded (view id -> reason), so that
+    only the estimates holding it fail."""
     views, problems = {}, {}
     for view_id, view in _read_view_messages(path, image_topic, view_ids, bag, extras).items():
         try:
-            views[view_id] = decode_view(view.image, view.depth, view.mask, view.camera_info, view.gravity_up)
+            decoded = decode_view(view.image, view.depth, view.mask, view.camera_info, view.gravity_up)
+            views[view_id] = MessageView(**{f.name: getattr(decoded, f.name) for f in fields(ViewInput)},
+                                         messages=view)
         except AdapterError as err:
             problems[view_id] = f"it does not decode: {err}"
     return views, problems

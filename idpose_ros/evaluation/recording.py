@@ -29,15 +29,10 @@ from idpose_ros.evaluation.bag_evaluation import BagEvaluation
 from idpose_ros.evaluation.bag_io import BagError
 from idpose_ros.evaluation.bag_views import BagViews, load_views
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
-from idpose_ros.recording.log_format import IMAGE_TOPIC, INPUT_TOPICS, LIBRARY_PREFIX, Recording, read_recording
-from idpose_ros.recording.mcap_log import RecordingUnreadable, scan_header
+from idpose_ros.recording.log_format import IMAGE_TOPIC, INPUT_TOPICS, Recording, read_recording
+from idpose_ros.recording.mcap_log import RecordingUnreadable
 
 LIVE_METHOD = "as estimated live"
-
-
-def is_recording(path: Path) -> bool:
-    """Whether ``path`` is an mcap file the flight recorder wrote."""
-    return path.is_file() and path.suffix == ".mcap" and scan_header(path).startswith(LIBRARY_PREFIX)
 
 
 def recording_ground_truth(recording: Recording, ground_truth: GroundTruthOptions) -> GroundTruthOptions:
@@ -124,8 +119,8 @@ def open_recording(path: Path, ground_truth: GroundTruthOptions, seed: int) -> R
     except (RecordingUnreadable, ValueError) as err:
         raise BagError(f"{str(path)!r} is not a readable flight recording: {err}") from None
     if not recording.scan.sealed:
-        raise BagError(f"{str(path)!r} has no end (the node was killed while recording): start the node on its "
-                       "record_dir once, which seals it")
+        raise BagError(f"{str(path)!r} has no end (the node was killed while recording): seal it with "
+                       f"`ros2 run idpose_ros seal_recording {path}`, or start the node on its record_dir once")
     gt = recording_ground_truth(recording, ground_truth)
     views = _with_gravity(read_views(path, gt), recording)
     tasks, live, left_out = recorded_tasks(recording, views, gt, seed)

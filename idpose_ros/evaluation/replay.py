@@ -4,8 +4,9 @@ Per view set: set the node's parameters that shape the estimate (solver settings
 object distance), publish each view's other inputs (depth, mask, CameraInfo, gravity as the camera's
 orientation) on the node's topics stamped as its image, then send the images as one goal and read the
 typed result: poses, per-view scores and ambiguity, and the same details an offline estimate reports
-(``idpose_ros.estimate_result``). The node runs in this process (started here, model loaded by the
-node) or is a running node named by ``node_name``.
+(``idpose_ros.estimate_result``). A view read from a bag goes out as its messages were recorded (compressed
+images stay compressed, 16UC1 depth stays 16UC1), restamped so the node matches them as one view. The node
+runs in this process (started here, model loaded by the node) or is a running node named by ``node_name``.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
 from geometry_msgs.msg import QuaternionStamped
 from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor
@@ -35,7 +37,7 @@ from idpose_core.view_input import ViewInput
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.estimate_result import view_set_estimate
 from idpose_ros.node.estimator_node import NODE_NAME, SERVICE_QOS, EstimatorNode, load_configured_predictor
-from idpose_ros.view_decoding import ViewMessages, encode_view
+from idpose_ros.view_decoding import MessageView, ViewMessages, encode_view, restamped
 from msg_adapters import matrix_to_pose
 
 SERVICE_TIMEOUT = 10.0  # s to wait for a service call, a subscriber or a parameter change
@@ -59,6 +61,14 @@ def _wait(condition: Callable[[], bool], timeout: float, what: str) -> None:
         if time.monotonic() > deadline:
             raise ReplayError(f"timed out after {timeout:g} s waiting for {what}")
         time.sleep(0.01)
+
+
+def as_sent(view: ViewInput, stamp: TimeMsg) -> ViewMessages:
+    """What the replay publishes for a view, stamped ``stamp`` in ``REPLAY_FRAME``: the messages it was read from,
+    as recorded (compressed, 16UC1 depth, ...), or, for a view that has none, its lossless encoding."""
+    if isinstance(view, MessageView) and view.messages is not None:
+        return restamped(view.messages, stamp, REPLAY_FRAME)
+    return encode_view(view, stamp, REPLAY_FRAME)
 
 
 class ReplayEstimator:
@@ -168,7 +178,7 @@ class ReplayEstimator:
                               "object_distance": float(object_distance), "anchor_frame": ""})
         for attempt in range(1, INPUT_ATTEMPTS + 1):
             start = self._client.get_clock().now().nanoseconds
-            encoded = [encode_view(view, Time(nanoseconds=start + k * VIEW_STAMP_STEP_NS).to_msg(), REPLAY_FRAME)
+            encoded = [as_sent(view, Time(nanoseconds=start + k * VIEW_STAMP_STEP_NS).to_msg())
                        for k, view in enumerate(views)]
             if any([self._publish_inputs(view) for view in encoded]):
                 time.sleep(INPUTS_SETTLE * attempt)

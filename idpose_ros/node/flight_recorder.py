@@ -32,7 +32,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.node.view_buffer import View
 from idpose_ros.recording.log_format import Recording, RecordingWriter, read_recording
-from idpose_ros.recording.mcap_log import RecordingUnreadable, seal_mcap
+from idpose_ros.recording.mcap_log import RecordingInUse, RecordingUnreadable, seal_mcap
 from idpose_ros.view_decoding import ViewMessages, decode_view
 from msg_adapters import AdapterError, stamp_nanoseconds
 
@@ -140,7 +140,12 @@ class FlightRecorder:
         except (RecordingUnreadable, ValueError) as err:
             self._set_aside(files[-1], str(err))
             return None
-        self._seal(recording)
+        try:
+            self._seal(recording)
+        except RecordingInUse as err:
+            self.resumed = "the newest recording is in use"
+            self._error(f"{err}; another node records into {str(self.directory)!r}: nothing resumed from it")
+            return None
         chain = 0
         while not recording.carried_complete and chain < MAX_CHAIN:
             earlier = recording.session.get("resumed_from") or recording.session.get("previous")

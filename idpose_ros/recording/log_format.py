@@ -27,7 +27,7 @@ from std_msgs.msg import String
 
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.recording.definitions import msgtype_of
-from idpose_ros.recording.mcap_log import McapLog, Scan, scan_mcap
+from idpose_ros.recording.mcap_log import McapLog, Scan, scan_header, scan_mcap
 from idpose_ros.view_decoding import ViewMessages
 from msg_adapters import stamp_nanoseconds
 
@@ -197,3 +197,13 @@ def read_recording(path: Path) -> Recording:
         group = {}
     return recording
 
+
+def is_recording(path: Path) -> bool:
+    """Whether ``path`` is an mcap file the flight recorder wrote."""
+    path = Path(path)
+    return path.is_file() and path.suffix == ".mcap" and scan_header(path).startswith(LIBRARY_PREFIX)
+
+
+def recordings_in(folder: Path) -> list[Path]:
+    """The flight recordings under ``folder`` (any depth: a record_dir, or a folder of them), sorted by path."""
+    return sorted(path for path in Path(folder).rglob("*.mcap") if is_recording(path))

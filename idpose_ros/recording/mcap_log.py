@@ -11,6 +11,7 @@ carries its full ros2msg definition, as rosbags' readers need.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import struct
 from collections.abc import Iterator
@@ -60,12 +61,24 @@ class Scan:
         return 0 if self.sealed else self.size - self.end
 
 
+def hold_lock(stream: BinaryIO) -> bool:
+    """Take the exclusive advisory lock of an open file, without waiting; False when another process holds it.
+    The system drops a lock when its process ends, however it ends: a held lock means a live writer."""
+    try:
+        fcntl.flock(stream.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
+
+
 class McapLog:
-    """Appends messages to a new mcap file, flushing after each; ``close`` writes the summary and footer."""
+    """Appends messages to a new mcap file, flushing after each; ``close`` writes the summary and footer. The
+    file stays locked (``hold_lock``) while it is open, so that no one seals it under a live writer."""
 
     def __init__(self, path: Path, library: str) -> None:
         self.path = path
         self._file: BinaryIO = open(path, "xb")  # noqa: SIM115 (closed by close())
+        hold_lock(self._file)
         self._writer = Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
                               index_types=IndexType.NONE)
         self._channels: dict[tuple[str, str], int] = {}
@@ -167,9 +180,14 @@ def scan_mcap(path: Path, library_prefix: str) -> Scan:
     return scan
 
 
+class RecordingInUse(RecordingUnreadable):
+    """A file a live process is still writing: it has no end yet because it is not finished."""
+
+
 def seal_mcap(path: Path, scan: Scan) -> None:
     """Make a killed file whole: cut the record it left half written and append the end records (no summary; a
-    reader scans the messages). Nothing before that record changes; a sealed file is left as it is."""
+    reader scans the messages). Nothing before that record changes; a sealed file is left as it is.
+    RecordingInUse when a live writer still holds the file."""
     if scan.sealed:
         return
     builder = RecordBuilder()
@@ -177,6 +195,8 @@ def seal_mcap(path: Path, scan: Scan) -> None:
     Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
     builder.write(MCAP0_MAGIC)
     with open(path, "r+b") as stream:
+        if not hold_lock(stream):
+            raise RecordingInUse(f"{path} is being written by a running node: it is sealed when the node stops")
         stream.truncate(scan.end)
         stream.seek(scan.end)
         stream.write(builder.end())
