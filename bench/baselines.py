@@ -11,7 +11,7 @@ RotAcc@15/30, mean rotation error, the convergence counts "A + B of C", seconds 
 by the true angle between anchor and target. The baselines cost seconds, ID-Pose minutes, so the baselines
 alone also run on ``--baseline-samples`` picks per bag (the same tasks ``evaluate_bag`` plans, through its
 ``classical_baseline``), for convergence counts and accuracy by angle on more pairs. Prints the tables and
-writes bench/results/baselines.json. ``--jobs`` bags are evaluated at once, each in its own process with its
+writes bench/results/baselines/baselines.json. ``--jobs`` bags are evaluated at once, each in its own process with its
 own model and ``--threads`` threads.
 
     python bench/baselines.py [--samples 1] [--preset fast] [--size 512] [--jobs 2 --threads 1]
@@ -32,6 +32,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import numpy as np  # noqa: E402 (after the path setup)
 import torch  # noqa: E402
 
+from bench.result_files import result_path  # noqa: E402
 from idpose_core.baselines import BASELINES, TITLES  # noqa: E402
 from idpose_core.baselines.scoring import estimate_summary  # noqa: E402
 from idpose_core.evaluation.estimator import ViewSetEstimator
@@ -46,7 +47,7 @@ from idpose_ros.evaluation.bag_views import load_views
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 
-OUT = ROOT / "bench" / "results" / "baselines.json"
+OUT = result_path("baselines")
 ID_POSE = "ID-Pose (demo model)"
 ANGLE_BINS = ((0.0, 30.0), (30.0, 60.0), (60.0, 180.0))  # true anchor-target angle, degrees
 _WORKER: dict[str, ViewSetEstimator] = {}  # the model of this worker process

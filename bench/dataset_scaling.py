@@ -9,8 +9,8 @@
    into the two-worker run's folder, which already holds the bags' n = 2 estimates of that pick (a
    rerun skips them). The demo model knows only its six synthetic objects: omni3d is at chance.
 
-Prints the figures, writes bench/results/dataset_scaling.json and the merged report as
-bench/results/dataset_report.md.
+Prints the figures, writes bench/results/dataset_scaling/dataset_scaling.json and the merged report as
+bench/results/dataset_scaling/dataset_report.md.
 
     python bench/dataset_scaling.py [--samples 4] [--preset fast]
 """
@@ -28,7 +28,11 @@ from collections import Counter
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results"
+sys.path.insert(0, str(ROOT))  # run as a script from a checkout
+
+from bench.result_files import result_path  # noqa: E402
+
+OUT, REPORT = result_path("dataset_scaling"), result_path("dataset_scaling", "dataset_report.md")
 OMNI3D = ROOT.parent / "shared" / "reference" / "idpose-official" / "omni3d.json"
 
 
@@ -51,7 +55,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", type=int, default=4, help="picks per bag (4: 24 estimates of n = 2)")
     parser.add_argument("--preset", choices=("default", "fast"), default="fast")
-    parser.add_argument("--out", type=Path, default=RESULTS / "dataset_scaling.json")
+    parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
     bags = [str(path) for path in sorted((ROOT / "data" / "demo_bags").iterdir()) if (path / "metadata.yaml").is_file()]
     common = ["--seed", "0", "--preset", args.preset, "--num-cpus-per-worker", "1"]
@@ -74,7 +78,7 @@ def main() -> None:
             report = json.loads((out / "report.json").read_text())
             result["report"] = {"wall_seconds_of_the_rerun": seconds, "estimates": report["estimates"],
                                 "datasets": report["datasets"], "all": report["all"]}
-            shutil.copy(out / "report.md", RESULTS / "dataset_report.md")
+            shutil.copy(out / "report.md", REPORT)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"\n{one['estimates']} estimates: 1 worker {one['wall_seconds']:.0f} s, "
           f"2 workers {two['wall_seconds']:.0f} s wall, "

@@ -6,7 +6,8 @@ its own random cameras): one per demo object (held-out views of the training obj
 object (the first of the catalogue's benchmark objects, ``random_urdfs`` blobs the model never saw). Runs
 ``evaluate_bag`` offline on each (``--n 2``, ``--samples`` picks, the solver preset and model precision given),
 and sums the pairs up per set beside the random-pose baseline that ``evaluate_bag`` scores on the same pairs. Prints
-the table and writes bench/results/demo_model_accuracy.json (``_<precision>`` before ``.json`` unless float32).
+the table and writes bench/results/demo_model_accuracy/demo_model_accuracy.json (``_<precision>`` before ``.json``
+unless float32).
 
     python bench/demo_model_accuracy.py [--samples 4] [--heldout 6] [--preset default] [--precision bfloat16]
 """
@@ -24,6 +25,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import torch  # noqa: E402 (after the path setup)
 
+from bench.result_files import result_path  # noqa: E402
 from idpose_core.evaluation.estimator import ViewSetEstimator
 from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
@@ -33,7 +35,7 @@ from idpose_ros.evaluation.bag_evaluation import evaluate_bag
 from idpose_ros.evaluation.bag_report import pooled_summaries, write_report  # noqa: E402
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
 
-OUT = ROOT / "bench" / "results" / "demo_model_accuracy.json"
+OUT = result_path("demo_model_accuracy")
 
 
 def evaluate_set(object_set: str, names: list[str], estimator: ViewSetEstimator, args: argparse.Namespace,

@@ -9,7 +9,7 @@ errors are reported beside the times.
 
 Usage (from the repository root): python -m bench.end_to_end [--views 2 4] [--presets default fast]
        [--scenes 2] [--threads 1] [--model-dir FOLDER]
-Writes bench/results/end_to_end.json.
+Writes bench/results/end_to_end/end_to_end.json.
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ import time
 import numpy as np
 import torch
 
-from bench.unit_costs import RESULTS
+from bench.result_files import result_path
 from idpose_core.cameras import spherical_to_c2w
 from idpose_core.demo_model import DemoPredictor
 from idpose_core.metrics import pair_errors
@@ -60,8 +60,8 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads (tiny tensors: 1 is the quickest)")
     parser.add_argument("--model-dir", default="", help="a demo-model folder instead of the embedded one")
     args = parser.parse_args()
-    out = RESULTS / "end_to_end.json"
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    out = result_path("end_to_end")
+    out.parent.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
 
     start = time.perf_counter()

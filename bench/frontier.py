@@ -10,7 +10,7 @@ the presets face real ambiguity) or of the demo objects, the render oracle (``be
 scenes, its learning rates) and rolled bags (up to 45 deg) estimated with their Imu gravity; the bags are
 evaluated with ``evaluate_bag``; pair counts are distinct pairs.
 ``--rows`` picks rows (``ROWS`` and the cost levers ``LEVERS``), ``--bag-rows`` those also run on the
-bags; prints the table, writes bench/results/frontier.json (or ``--out``).
+bags; prints the table, writes bench/results/frontier/frontier.json (or ``--out``).
 
     python bench/frontier.py [--object-set heldout] [--objects 48] [--oracle-objects 12] [--rows default fast ifusion]
 """
@@ -30,6 +30,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import numpy as np  # noqa: E402 (after the path setup)
 import torch  # noqa: E402
 
+from bench.result_files import result_path  # noqa: E402
 from bench.solver_oracle import RENDER_SIZE, oracle_records, scene_cameras  # noqa: E402
 from bench.unit_costs import UnitCosts  # noqa: E402
 from idpose_core.evaluation.protocol import EvaluationProtocol  # noqa: E402
@@ -45,7 +46,7 @@ from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 from idpose_ros.evaluation.estimators import EstimatorOptions, OfflineEstimator  # noqa: E402
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions  # noqa: E402
 
-OUT = ROOT / "bench" / "results" / "frontier.json"
+OUT = result_path("frontier")
 # The fast preset before the frontier (kept to show what the leaner one saves).
 OLD_FAST = dict(probe_batch=4, keep_top=3, refine_steps_per_view=100, runner_up_steps=30)
 # row -> (view count, preset, SolverConfig overrides)

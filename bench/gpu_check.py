@@ -31,6 +31,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import torch  # noqa: E402 (after the path setup)
 
+from bench.result_files import result_path  # noqa: E402
 from bench.step_cost import (  # noqa: E402
     official_step,
     ours_probe,
@@ -46,7 +47,7 @@ from idpose_core.solver import SolverConfig, estimate_poses  # noqa: E402
 from idpose_core.solver.config import PRESETS  # noqa: E402
 from idpose_core.zero123 import Zero123Config, Zero123Predictor  # noqa: E402
 
-OUT = ROOT / "bench" / "results" / "gpu_check.json"
+OUT = result_path("gpu_check")
 # --reduced: schedules cut to a few samples per stage where the preset leaves the setting at its default
 REDUCED_SCHEDULE = dict(azimuth_candidates=2, polar_candidates_deg=(0.0,), adjust_steps=1, refine_steps_per_view=2,
                         runner_up_steps=1, start_steps=2, average_last=1, probe_batch=2)

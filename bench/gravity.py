@@ -8,7 +8,7 @@ upright (the same cameras otherwise). Each is evaluated with ``evaluate_bag`` (e
 camera_link's axes: the extrinsic comes from the bag's transforms), the gravity polar angles kept
 fixed or only used to start from (``known_polar``). Then one object under the
 ``default`` and ``fast`` presets, with and without gravity, for the solver's sample counters and the
-seconds per estimate. Prints the tables and writes bench/results/gravity.json.
+seconds per estimate. Prints the tables and writes bench/results/gravity/gravity.json.
 
     python bench/gravity.py [--samples 2] [--roll-deg 45] [--preset fast] [--threads 2]
 """
@@ -27,6 +27,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import numpy as np  # noqa: E402 (after the path setup)
 import torch  # noqa: E402
 
+from bench.result_files import result_path  # noqa: E402
 from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
@@ -36,7 +37,7 @@ from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions
 
-OUT = ROOT / "bench" / "results" / "gravity.json"
+OUT = result_path("gravity")
 WITH_GRAVITY = GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
 WITHOUT = GroundTruthOptions()
 # (cameras, gravity) conditions of the accuracy runs: bag roll, ground-truth options, solver overrides

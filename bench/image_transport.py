@@ -12,7 +12,7 @@ Fast DDS's default transports; ``FASTDDS_BUILTIN_TRANSPORTS=LARGE_DATA``; and th
 subscriber or both; each with a best-effort subscription (sensor data, what the estimator uses) and
 a reliable one. Every case runs ``--repeat`` times, the rounds interleaved so that a change of load
 on the machine touches every case alike. No node of this project is involved. Prints a table and
-writes ``bench/results/image_transport.json``. Not a test: the figures depend on the machine and its
+writes ``bench/results/image_transport/image_transport.json``. Not a test: the figures depend on the machine and its
 load.
 """
 from __future__ import annotations
@@ -28,7 +28,11 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULT = ROOT / "bench" / "results" / "image_transport.json"
+sys.path.insert(0, str(ROOT))  # run as a script from a checkout
+
+from bench.result_files import result_path  # noqa: E402
+
+RESULT = result_path("image_transport")
 PROFILE = ROOT / "config" / "fastdds_large_images.xml"
 TOPIC = "bench_frames"
 PAYLOADS = {"rgb8 1920x1080": ("raw", 1920, 1080), "jpeg 1280x720": ("jpeg", 1280, 720)}

@@ -9,7 +9,7 @@ freed). The process's RSS (Linux VmRSS) is read after each step; the second cycl
 memory grows from one configuration to the next.
 
 Usage (from the repository root): python -m bench.lifecycle_memory [--config full|tiny]
-Writes bench/results/lifecycle_memory.json and prints one line per step.
+Writes bench/results/lifecycle_memory/lifecycle_memory.json and prints one line per step.
 """
 from __future__ import annotations
 
@@ -27,13 +27,14 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image
 
+from bench.result_files import result_path
 from idpose_core.synthetic.scenes import SceneRenderer, demo_objects
 from idpose_core.zero123 import Zero123Config, Zero123Predictor
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.node.estimator_node import EstimatorNode
 from msg_adapters import array_to_image
 
-RESULTS = Path(__file__).resolve().parent / "results"
+OUT = result_path("lifecycle_memory")
 STEPS = ("configure", "activate", "estimate", "deactivate", "cleanup")
 MINIMAL_SOLVER = dict(azimuth_candidates=1, probe_batch=1, adjust_steps=0, keep_top=1, refine_steps_per_view=1,
                       average_last=1, runner_up_steps=0)
@@ -117,8 +118,8 @@ def main() -> None:
     freed = 100 * summary["freed_share"]
     print(f"active after an estimate {active:.3f} GB, after cleanup {cleaned[-1]:.3f} GB: {freed:.0f} % of the "
           "model's memory given back", flush=True)
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "lifecycle_memory.json").write_text(json.dumps(summary, indent=1) + "\n")
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text(json.dumps(summary, indent=1) + "\n")
 
 
 if __name__ == "__main__":

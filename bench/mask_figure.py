@@ -5,7 +5,7 @@ Top rows: views of a fresh tabletop bag (``make_synthetic_bag --scene tabletop``
 the image, GrabCut's mask and the depth mask, each outlined on the image, with their IoU against the
 true mask. Bottom row: the official ID-Pose repository's lion photos (a figurine on a scanner bed, no
 depth), with GrabCut's mask, when ``../shared/reference/idpose-official`` is beside the checkout.
-Writes bench/results/masks_before_after.png.
+Writes bench/results/tabletop/masks_before_after.png.
 
     python bench/mask_figure.py [--object teddy] [--views 3]
 """
@@ -22,12 +22,13 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import cv2  # noqa: E402 (after the path setup)
 import numpy as np  # noqa: E402
 
+from bench.result_files import result_path  # noqa: E402
 from bench.tabletop import iou, tabletop_views  # noqa: E402
 from idpose_core.depth_segmentation import depth_cut  # noqa: E402
 from idpose_core.preprocessing import grabcut_mask  # noqa: E402
 from idpose_ros.dataset.synthetic_bag import SyntheticBagOptions, make_bag  # noqa: E402
 
-OUT = ROOT / "bench" / "results" / "masks_before_after.png"
+OUT = result_path("tabletop", "masks_before_after.png")
 LION = ROOT.parent / "shared" / "reference" / "idpose-official" / "data" / "demo" / "lion"
 TILE = 240
 

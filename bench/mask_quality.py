@@ -23,8 +23,9 @@ pipeline computes from the colour image, the depth and the intrinsics (``foregro
 cut, with its fallbacks), without gravity; views where under 300 target pixels, or under half of its silhouette,
 are in sight (a target hidden behind another object) are left out.
 `--depth-noise` gives the depth as a camera reads it (relative Gaussian noise, rounded to millimetres).
-Prints mean and worst IoU per row and overall (the five failure types) with the number of views, and
-writes bench/results/mask_quality_<seed>.json.
+Prints mean and worst IoU per row and overall (the five failure types) with the number of views, and adds the
+run (the commit measured, the seed, the noise and the table) to bench/results/mask_quality/summary.json;
+``--out FILE`` also writes every view's row there.
 
     python bench/mask_quality.py [--seed 1000] [--views 8] [--size 320] [--depth-noise 0.003]
 """
@@ -34,6 +35,7 @@ import argparse
 import dataclasses
 import json
 import math
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -43,6 +45,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import numpy as np  # noqa: E402 (after the path setup)
 
+from bench.result_files import result_path  # noqa: E402
 from idpose_core.preprocessing import foreground_mask, mask_iou  # noqa: E402
 from idpose_core.synthetic.robot_views import pinhole_intrinsics  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
@@ -63,6 +66,9 @@ POLAR_DEG, DISTANCE = (30.0, 82.0), (0.4, 0.75)
 MIN_VISIBLE = 300  # px of the target that must be in sight
 MIN_VISIBLE_SHARE = 0.5  # of the target's silhouette: a target mostly hidden behind another object is not in view
 EXTRA_ROWS = ("off_centre_roi", "crowded", "crowded_roi")  # off-centre views beside the failure types
+SUMMARY_ABOUT = ("bench/mask_quality.py runs: per run the code measured (a commit; earlier code was run from its "
+                 "checkout with this bench copied in), the seed, the depth noise and the mask IoU per failure type "
+                 "(mean and worst); per-view rows only where a run wrote --out.")
 
 
 def challenge_view(challenge: str, index: int, seed: int, size: int, crowded: bool = False,
@@ -141,8 +147,7 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=320, help="image side (px)")
     parser.add_argument("--depth-noise", type=float, default=0.0,
                         help="depth noise as a share of each reading, then rounded to mm (0: exact renders)")
-    parser.add_argument("--out", type=Path, default=None,
-                        help="JSON file (default bench/results/mask_quality_<seed>.json)")
+    parser.add_argument("--out", type=Path, default=None, help="JSON file for every view's row (default: none)")
     args = parser.parse_args()
     started = time.monotonic()
     results = measure(args.seed, args.views, args.size, args.depth_noise)
@@ -151,12 +156,24 @@ def main() -> None:
     print(f"| type (seed {args.seed}) | views | mean IoU | worst IoU |\n|---|---|---|---|")
     for name, row in table.items():
         print(f"| {name} | {row['views']} | {row['mean']:.3f} | {row['worst']:.3f} |")
-    out = args.out or ROOT / "bench" / "results" / f"mask_quality_{args.seed}.json"
-    out.write_text(json.dumps({"seed": args.seed, "size": args.size, "depth_noise": args.depth_noise,
-                               "summary": table, "views": results,
-                               "seconds": time.monotonic() - started}, indent=2) + "\n")
-    print(f"{time.monotonic() - started:.0f} s; {out}")
+    run = {"code": measured_code(), "seed": args.seed, "depth_noise": args.depth_noise, "size": args.size,
+           "summary": table, "seconds": round(time.monotonic() - started, 1)}
+    summary_file = result_path("mask_quality", "summary.json")
+    runs = json.loads(summary_file.read_text())["runs"] if summary_file.is_file() else []
+    summary_file.parent.mkdir(parents=True, exist_ok=True)
+    summary_file.write_text(json.dumps({"about": SUMMARY_ABOUT, "runs": [*runs, run]}, indent=1) + "\n")
+    if args.out is not None:
+        args.out.write_text(json.dumps({**run, "views": results}, indent=2) + "\n")
+    print(f"{run['seconds']:.0f} s; {summary_file}" + (f", {args.out}" if args.out else ""))
 
+
+def measured_code() -> str:
+    """The commit of the checkout measured (with "+changes" when its tracked files differ from it)."""
+    def git(*arguments: str) -> str:
+        return subprocess.run(["git", *arguments], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+
+    commit = git("rev-parse", "--short", "HEAD") or "unknown"
+    return commit + ("+changes" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 if __name__ == "__main__":
     main()

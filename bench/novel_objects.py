@@ -8,8 +8,8 @@ with aligned depth under a random lamp, and one per demo object on white and on 
 ``evaluate_bag`` offline on each (n = 2, ``--preset``; on white without and with gravity from the bag's Imu;
 tabletops with their depth and intrinsics, so the masks come from depth) and sums the pairs up per set beside
 the random-pose baseline scored on the same pairs, counting distinct pairs. Every model given runs on the same
-bags. Prints one table and writes bench/results/novel_objects.json, keeping the rows of models not run this
-time when the bags were the same.
+bags. Prints one table and writes bench/results/novel_objects/novel_objects.json, keeping the rows of models not
+run this time when the bags were the same.
 
     python bench/novel_objects.py --model new=idpose_core/assets/demo_model --model old=/path/to/old_model
 """
@@ -27,6 +27,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import torch  # noqa: E402 (after the path setup)
 
+from bench.result_files import result_path  # noqa: E402
 from bench.robot_crops import evaluate_set  # noqa: E402
 from idpose_core.evaluation.protocol import EvaluationProtocol  # noqa: E402
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
@@ -42,7 +43,7 @@ from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator  # noqa: E402
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions  # noqa: E402
 
-OUT = ROOT / "bench" / "results" / "novel_objects.json"
+OUT = result_path("novel_objects")
 PLAIN, GRAVITY = GroundTruthOptions(), GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
 DEPTH = GroundTruthOptions(extras=ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC))
 WHITE, TABLETOP = {"scene": "plain"}, {"scene": "tabletop", "light": "random"}
@@ -101,7 +102,8 @@ def main() -> None:
     models = dict(item.split("=", 1) for item in args.model or ["embedded="])
     torch.set_num_threads(args.threads)
     started = time.monotonic()
-    bags_key = {"seed": args.seed, "seed_per_bag": True, "views": args.views, "preset": args.preset,
+    bags_key = {"seed": args.seed, "seed_per_bag": True, "picks": "distinct openings", "views": args.views,
+                "preset": args.preset,
                 "heldout": list(BENCH_HELDOUT), "heldout_samples": args.heldout_samples,
                 "demo_samples": args.demo_samples}
     previous = json.loads(args.out.read_text()) if args.out.is_file() else {}

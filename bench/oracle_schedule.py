@@ -13,7 +13,7 @@ Objects: 6 held-out random blobs with a marker cube and the 6 demo objects (duck
 ball, lego, desk; the mug and the ball are round bodies whose only azimuth cue is a small part).
 
 Usage (from the repository root): python -m bench.oracle_schedule [--blobs 6] [--scenes 4 2]
-Writes bench/results/oracle_schedule.json and bench/results/oracle_schedule.png.
+Writes bench/results/oracle_schedule/oracle_schedule.json and oracle_schedule.png beside it.
 """
 from __future__ import annotations
 
@@ -27,12 +27,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import torch  # noqa: E402
 
+from bench.result_files import result_path  # noqa: E402
 from bench.solver_oracle import oracle_records  # noqa: E402
-from bench.unit_costs import RESULTS  # noqa: E402
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.solver import SolverConfig  # noqa: E402
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects, oracle_objects  # noqa: E402
+
+OUT, PLOT = result_path("oracle_schedule"), result_path("oracle_schedule", "oracle_schedule.png")
 
 REFINE_STEPS = (0, 25, 50, 100, 200, 400, 600)
 PROBE_BATCHES = (4, 8, 16)
@@ -124,7 +126,7 @@ def main() -> None:
                                       f"{f['median_rot_err_deg']:>9.2g}" for f in cells))
     print("fewest refinement steps within 2 points of 600: " + ", ".join(f"n={c}: {s}" for c, s in lean.items()))
 
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    OUT.parent.mkdir(parents=True, exist_ok=True)
     report = {
         "objects": [spec.name for spec in specs],
         "scenes_per_object": dict(zip(map(str, VIEW_COUNTS), args.scenes)),
@@ -135,9 +137,9 @@ def main() -> None:
         "reductions": "runner_up_steps 0 except fast (only sets the ambiguity flag); oracle learning rates "
                       "adjust 0.2 / refine 0.02; 64 px renders; 1 torch thread",
     }
-    (RESULTS / "oracle_schedule.json").write_text(json.dumps(report, indent=2) + "\n")
-    plot(results, len(specs), RESULTS / "oracle_schedule.png")
-    print(f"wrote {RESULTS / 'oracle_schedule.json'} and {RESULTS / 'oracle_schedule.png'}")
+    OUT.write_text(json.dumps(report, indent=2) + "\n")
+    plot(results, len(specs), PLOT)
+    print(f"wrote {OUT} and {PLOT}")
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ arithmetic, not a trained model's landscape: the demo model's accuracy in bfloat
 ``bench/demo_model_accuracy.py --precision bfloat16``.
 
 Usage: python bench/precision_fidelity.py [--steps 8] [--threads 2] [--config full|tiny]
-Writes bench/results/precision_fidelity.json and prints the figures.
+Writes bench/results/precision_fidelity/precision_fidelity.json and prints the figures.
 """
 from __future__ import annotations
 
@@ -21,11 +21,12 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from bench.result_files import result_path  # noqa: E402
 from idpose_core.model_loading import PRECISIONS  # noqa: E402
 from idpose_core.zero123 import Zero123Config, Zero123Predictor  # noqa: E402
 
 PROBE_BATCH, PROBE_T, STEP_T = 16, 200, (200, 210)
-OUT = ROOT / "bench" / "results" / "precision_fidelity.json"
+OUT = result_path("precision_fidelity")
 
 
 def samples(count_probe: int, count_steps: int, noise_shape: tuple, seed: int = 0) -> dict:

@@ -1,4 +1,4 @@
-"""Tables and target checks from bench/results/*.json, printed and written into bench/README.md.
+"""Tables and target checks from bench/results/<benchmark>/*.json, printed and written into bench/README.md.
 
 Usage (from the repository root): python -m bench.report
 Replaces the text between the ``<!-- results:begin -->`` and ``<!-- results:end -->`` markers of
@@ -9,7 +9,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from bench.unit_costs import QUIET_REFERENCE, RESULTS, STEP_COST_FILE
+from bench.result_files import result_path
+from bench.unit_costs import QUIET_REFERENCE
 
 README = Path(__file__).resolve().parent / "README.md"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
@@ -17,9 +18,9 @@ PROJECTIONS = ("seconds", "cpu_seconds", "reference_seconds")
 PRESETS = ("default", "fast")
 
 
-def load(name: str) -> dict | None:
-    """A result file's content, or None when it has not been produced."""
-    path = RESULTS / name
+def load(benchmark: str, name: str = "") -> dict | None:
+    """A result file's content (``result_path``), or None when it has not been produced."""
+    path = result_path(benchmark, name)
     return json.loads(path.read_text()) if path.is_file() else None
 
 
@@ -153,9 +154,9 @@ def schedule_section(report: dict | None) -> list[str]:
                       f"{figures['median_rot_err_deg']:.2g} deg"]
         label = {"steps=600": "steps=600 (default; = batch=16)"}.get(name, name)
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    lines += ["", "Plot: [`results/oracle_schedule.png`](results/oracle_schedule.png). Fewest refinement steps "
-              "within 2 points of 600: " + ", ".join(f"n={n}: {s}" for n, s in report["lean_refine_steps"].items())
-              + "."]
+    plot = "results/oracle_schedule/oracle_schedule.png"
+    lean = ", ".join(f"n={n}: {steps}" for n, steps in report["lean_refine_steps"].items())
+    lines += ["", f"Plot: [`{plot}`]({plot}). Fewest refinement steps within 2 points of 600: {lean}."]
     return lines
 
 
@@ -250,11 +251,11 @@ def closing_note(steps: dict | None, counts: dict | None, schedule: dict | None,
 
 def render() -> str:
     """The whole generated block."""
-    steps, counts, schedule = load(STEP_COST_FILE.name), load("sample_counts.json"), load("oracle_schedule.json")
-    end_to_end = load("end_to_end.json")
-    accuracy = {precision: load(f"demo_model_accuracy{suffix}.json")
+    steps, counts, schedule = load("step_cost"), load("sample_counts"), load("oracle_schedule")
+    end_to_end = load("end_to_end")
+    accuracy = {precision: load("demo_model_accuracy", f"demo_model_accuracy{suffix}.json")
                 for precision, suffix in (("float32", ""), ("bfloat16", "_bfloat16"))}
-    sections = [step_cost_section(steps), precision_section(load("precision_fidelity.json"), accuracy),
+    sections = [step_cost_section(steps), precision_section(load("precision_fidelity"), accuracy),
                 counts_section(counts), schedule_section(schedule),
                 end_to_end_section(end_to_end), targets_section(steps, counts, schedule),
                 closing_note(steps, counts, schedule, end_to_end)]

@@ -8,7 +8,7 @@ by the white scenes' light (``--light training``), the same scene lit by a rando
 (``--light random``), and a white-background bag from fresh cameras. Runs ``evaluate_bag`` offline on each
 (n = 2, ``--samples`` picks, ``--preset``; the tabletop bags with their depth and intrinsics, so the masks come
 from depth) and sums the pairs up per set beside the random-pose baseline scored on the same pairs. Prints one
-table and writes bench/results/robot_crops.json.
+table and writes bench/results/robot_crops/robot_crops.json.
 
     python bench/robot_crops.py --model new=idpose_core/assets/demo_model --model old=/path/to/old_model
 """
@@ -26,6 +26,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 
 import torch  # noqa: E402 (after the path setup)
 
+from bench.result_files import result_path  # noqa: E402
 from idpose_core.evaluation.estimator import ViewSetEstimator  # noqa: E402
 from idpose_core.evaluation.protocol import EvaluationProtocol  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
@@ -36,7 +37,7 @@ from idpose_ros.evaluation.bag_views import ExtraTopics  # noqa: E402
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator  # noqa: E402
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions  # noqa: E402
 
-OUT = ROOT / "bench" / "results" / "robot_crops.json"
+OUT = result_path("robot_crops")
 DEPTH = GroundTruthOptions(extras=ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC))
 SETS = {  # name -> (bag options besides object and seed, ground-truth options)
     "tabletop, depth, training light": ({"scene": "tabletop", "light": "training"}, DEPTH),

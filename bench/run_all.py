@@ -1,7 +1,7 @@
 """Run every benchmark in order and rewrite the tables of bench/README.md from their results.
 
 Usage (from anywhere, after ``./run test`` has built the venv): .venv/bin/python bench/run_all.py
-       [--reuse-step-cost]   keep an existing bench/results/step_cost.json (that one needs ~12 GB and minutes)
+       [--reuse-step-cost]   keep an existing bench/results/step_cost/step_cost.json (that one needs ~12 GB and minutes)
 Each benchmark runs in its own process from the repository root; the first failure stops the run.
 """
 from __future__ import annotations
@@ -13,7 +13,11 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-STEP_COST_JSON = ROOT / "bench" / "results" / "step_cost.json"
+sys.path.insert(0, str(ROOT))  # run as a script from a checkout
+
+from bench.result_files import result_path  # noqa: E402
+
+STEP_COST_JSON = result_path("step_cost")
 BENCHMARKS = (
     ("1. step and probe cost, ours vs official (full-size model)", ["bench/step_cost.py"]),
     ("1b. bfloat16 vs float32 on the same samples (full-size model)", ["bench/precision_fidelity.py"]),

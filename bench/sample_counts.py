@@ -2,14 +2,14 @@
 
 Ours: ``estimate_poses`` run with the render oracle as a cheap predictor at the full iteration counts
 of each preset; the counts do not depend on the predictor. Official: ``bench/official_counts.py``
-(derived from its published algorithm). With ``bench/results/step_cost.json`` present, both are
+(derived from its published algorithm). With ``bench/results/step_cost/step_cost.json`` present, both are
 projected to full-size seconds on this CPU (``bench/unit_costs.py``), ours in each precision that run
 measured: wall and CPU seconds of that run, and reference figures of a quiet machine
 (``QUIET_REFERENCE``).
 
 Usage (from the repository root): python -m bench.sample_counts [--views 2 4 6 8] [--presets default fast]
        [--precisions float32 bfloat16]
-Writes bench/results/sample_counts.json.
+Writes bench/results/sample_counts/sample_counts.json.
 """
 from __future__ import annotations
 
@@ -21,8 +21,9 @@ from dataclasses import asdict
 import torch
 
 from bench.official_counts import OfficialSchedule, official_counts
+from bench.result_files import result_path
 from bench.solver_oracle import RENDER_SIZE, scene_cameras
-from bench.unit_costs import RESULTS, all_costs
+from bench.unit_costs import all_costs
 from idpose_core.solver import SolverConfig, estimate_poses
 from idpose_core.synthetic.render_oracle import ORACLE_SOLVER_SETTINGS, RenderOracle
 from idpose_core.synthetic.scenes import oracle_objects
@@ -90,8 +91,8 @@ def main() -> None:
                        for precision, units in costs.items()} or None,
         "rows": rows,
     }
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    out = RESULTS / "sample_counts.json"
+    out = result_path("sample_counts")
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(report, indent=2) + "\n")
     print(f"wrote {out}")
 

@@ -28,7 +28,7 @@ time is the steadier figure; each measurement also records the 1-minute load ave
 
 Usage: python bench/step_cost.py [--alternations 2] [--repeats 2] [--threads 2] [--config full|tiny]
        [--precisions float32 bfloat16]
-Writes bench/results/step_cost.json and prints the figures and the ratios.
+Writes bench/results/step_cost/step_cost.json and prints the figures and the ratios.
 """
 from __future__ import annotations
 

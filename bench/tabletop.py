@@ -15,7 +15,7 @@ and the same objects' white-background bags from the same seed. Measures, on eve
   camera_info, tabletop without (GrabCut), tabletop with the true masks as an external mask (what
   perfect segmentation would give), and the white-background bags.
 
-Prints the tables and writes bench/results/tabletop.json.
+Prints the tables and writes bench/results/tabletop/tabletop.json.
 
     python bench/tabletop.py [--samples 2] [--preset fast] [--threads 2]
 """
@@ -36,6 +36,7 @@ sys.path.insert(0, str(ROOT))  # run as a script from a checkout
 import numpy as np  # noqa: E402 (after the path setup)
 import torch  # noqa: E402
 
+from bench.result_files import result_path  # noqa: E402
 from idpose_core.depth_segmentation import backproject, depth_cut, object_distance  # noqa: E402
 from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.metrics import aggregate  # noqa: E402
@@ -55,7 +56,7 @@ from idpose_ros.evaluation.bag_views import ExtraTopics, load_views, read_bag_vi
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions
 
-OUT = ROOT / "bench" / "results" / "tabletop.json"
+OUT = result_path("tabletop")
 DEPTH = ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC)
 TRUTH = ExtraTopics(depth_topic=DEPTH_TOPIC, camera_info_topic=INFO_TOPIC, mask_topic=TRUE_MASK_TOPIC)
 TRUE_MASKS = ExtraTopics(mask_topic=TRUE_MASK_TOPIC)  # segmentation taken out of the question

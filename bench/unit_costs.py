@@ -1,4 +1,4 @@
-"""Measured unit costs (``bench/results/step_cost.json``) and full-size projections: counts x unit costs.
+"""Measured unit costs (``bench/results/step_cost/step_cost.json``) and full-size projections: counts x unit costs.
 
 Ours, in one precision: a differentiated sample of a one-sample step (refinement, runner-up) costs
 one measured step (``ours_step``); one of the exploration's adjust steps, which share batches of
@@ -19,8 +19,9 @@ import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent / "results"
-STEP_COST_FILE = RESULTS / "step_cost.json"
+from bench.result_files import result_path
+
+STEP_COST_FILE = result_path("step_cost")
 MEASURES = ("seconds", "cpu_seconds")
 # Reference figures of a quiet 2-core CPU of the kind measured here (2 threads): one official step (3.1 s of it
 # re-encoding), one official probe, and a frozen float32 UNet step on cached conditioning (ours).

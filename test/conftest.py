@@ -27,6 +27,8 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 ROOT = Path(__file__).resolve().parents[1]
+# Fixtures that start ROS nodes or processes: a test that takes one is marked slow (``pytest_collection_modifyitems``).
+NODE_OR_PROCESS_FIXTURES = {"ros_context", "harness", "colcon", "workspace", "tf2_msgs", "tf2_msgs_prefix"}
 COLCON = Path(sys.executable).with_name("colcon")
 # The ROS prefix this environment's ROS wheels installed (a pip-only install's stand-in for /opt/ros/jazzy).
 ROS_PREFIX = Path(sys.prefix)
@@ -188,3 +190,30 @@ def errors_of() -> Callable[[Any], Any]:
                                      torch.tensor([200, 205]), noise)
 
     return errors
+
+
+@pytest.fixture
+def harness(ros_context, tiny_model_dir, wait_for, request):
+    """A node per test, in a namespace of its own, with the tiny model and the fast solver (``node_harness``)."""
+    from node_harness import FAST_SOLVER, Harness
+
+    made = []
+
+    def make(**overrides: Any) -> Harness:
+        settings = {"model_path": str(tiny_model_dir), **FAST_SOLVER, **overrides}
+        made.append(Harness(ros_context, wait_for, f"/{request.node.name.split('[')[0]}_{len(made)}", **settings))
+        return made[-1]
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """``-m "not slow"`` is the fast lane: refuse a test that starts a node or a process through a fixture unless it
+    is marked slow (a marker forgotten would put minutes into the fast lane)."""
+    unmarked = [item.nodeid for item in items if NODE_OR_PROCESS_FIXTURES & set(getattr(item, "fixturenames", ()))
+                and item.get_closest_marker("slow") is None]
+    if unmarked:
+        raise pytest.UsageError("mark these tests @pytest.mark.slow (they start a node or a process): "
+                                + ", ".join(unmarked))

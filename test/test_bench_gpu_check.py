@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -13,6 +13,8 @@ import pytest
 from bench.step_cost import ADJUSTED_CANDIDATES
 from bench.unit_costs import QUIET_REFERENCE, UnitCosts, all_costs
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

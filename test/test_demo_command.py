@@ -1,7 +1,11 @@
 """`./run demo` (idpose_ros.demo) evaluates every shipped demo bag with the embedded model and sums up."""
 import json
 
+import pytest
+
 from idpose_ros import demo
+
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
 
 REDUCED = ["--image-size", "64", "--solver-param", "azimuth_candidates=2", "--solver-param", "adjust_steps=0",
            "--solver-param", "probe_batch=1", "--solver-param", "refine_steps_per_view=2",

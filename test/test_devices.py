@@ -40,6 +40,7 @@ def test_evaluate_bag_on_an_absent_device_is_one_line_not_a_traceback(capsys):
     assert "device 'cuda' is not available" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 @needs_no_cuda
 def test_the_node_names_the_device_and_stays_up(ros_context):
     node = EstimatorNode(context=ros_context, namespace="/absent_device",

@@ -13,16 +13,19 @@ from typing import Any
 
 import numpy as np
 import pytest
+from action_msgs.msg import GoalStatus
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from node_harness import TIMEOUT, header, mixed_encodings
 from rclpy.action import ActionClient
 from rclpy.action.client import ClientGoalHandle
 from sensor_msgs.msg import Image
-from test_estimator_node import TIMEOUT, harness, header, mixed_encodings  # noqa: F401 (harness: a fixture)
 
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.node.estimator_node import SERVICE_QOS
 from msg_adapters import pose_to_matrix
+
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
 
 Result = EstimatePoses.Result
 LONG_RUN = dict(refine_steps_per_view=1_000_000, average_last=1)  # runs until cancelled
@@ -67,7 +70,7 @@ def image_messages(object_views) -> list[Image]:
 
 
 @pytest.fixture
-def node(harness):  # noqa: F811 (the fixture imported from test_estimator_node)
+def node(harness):
     """A node with the fast solver and an action client: (harness, ActionProbe)."""
     def make(**overrides: Any):
         h = harness(capture_mode="on_request", **overrides)
@@ -79,7 +82,8 @@ def test_a_two_image_goal_gives_typed_poses_in_the_anchor_frame_with_feedback(no
     h, action = node(refine_steps_per_view=60, diagnostics_period=0.1)  # a run long enough for some feedback
     images = image_messages(object_views)
     status, result = action.run(images)
-    assert status == 4 and result.error_code == Result.SUCCEEDED and result.error_message == ""  # 4: SUCCEEDED
+    assert status == GoalStatus.STATUS_SUCCEEDED
+    assert result.error_code == Result.SUCCEEDED and result.error_message == ""
     assert result.run_id == 1 and h.node.status().run_id == 1
     assert result.poses.header.frame_id == "anchor_cam" and result.poses.header.stamp.sec == 42
     np.testing.assert_allclose(pose_to_matrix(result.poses.poses[0]), np.eye(4), atol=1e-9)
@@ -121,7 +125,7 @@ def test_bad_goals_end_in_invalid_goal_naming_the_image_and_the_problem(node, ob
     h, action = node()
     images = image_messages(object_views)
     status, one = action.run(images[:1])
-    assert status == 6 and one.error_code == Result.INVALID_GOAL  # 6: ABORTED
+    assert status == GoalStatus.STATUS_ABORTED and one.error_code == Result.INVALID_GOAL
     assert one.error_message == "a goal needs at least 2 images (the anchor first), got 1"
     broken = Image(header=header("cam", 50), encoding="rgb8", height=64, width=64, step=192, data=b"\x00" * 10)
     _, bad = action.run([images[0], broken])
@@ -146,7 +150,7 @@ def test_a_cancel_is_honoured_within_a_second_and_keeps_the_buffered_views(node,
     status, result = action.result(handle)
     latency = time.monotonic() - asked
     print(f"\ncancel latency: {latency * 1000:.0f} ms")
-    assert status == 5 and result.error_code == Result.CANCELED  # 5: CANCELED
+    assert status == GoalStatus.STATUS_CANCELED and result.error_code == Result.CANCELED
     assert result.error_message == "cancelled by an EstimatePoses cancel; the 2 buffered views stay for a retry"
     assert latency < 1.0
     assert h.node.status().views_buffered == 2 and h.state() == "idle"
@@ -227,7 +231,8 @@ def test_deactivate_cancels_a_running_goal(node, object_views):
     h.wait_for(lambda: h.node.status().state == "estimating", "the running goal")
     assert transition(h, change, Transition.TRANSITION_DEACTIVATE)
     status, result = action.result(handle)
-    assert status == 6 and result.error_code == Result.CANCELED and "deactivate" in result.error_message
+    assert status == GoalStatus.STATUS_ABORTED
+    assert result.error_code == Result.CANCELED and "deactivate" in result.error_message
 
 
 def test_each_estimate_is_broadcast_on_tf(node, object_views, tf2_msgs):

@@ -10,6 +10,10 @@ import re
 from pathlib import Path
 from xml.etree import ElementTree
 
+import pytest
+
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = ROOT / "launch" / "estimator.launch.py"
 

@@ -35,6 +35,8 @@ from idpose_ros.node.diagnostics import STATUS_NAME
 from idpose_ros.node.estimator_node import SERVICE_QOS
 from msg_adapters import array_to_image
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 PROFILE = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(ROOT / "config" / "fastdds_large_images.xml")}
 FAST = {"image_size": 32, "azimuth_candidates": 2, "probe_batch": 1, "adjust_steps": 0, "keep_top": 1,

@@ -21,6 +21,8 @@ from idpose_ros.node.parameters import (
     solver_config,
 )
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "autostart", "publish_tf",
              "diagnostics_period", "gravity", "imu_to_optical", "imu_window", "input_tolerance",

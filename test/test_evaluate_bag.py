@@ -150,6 +150,7 @@ def test_node_values_follow_the_node_parameters():
         node_values("default", None, [], image_size=4)
 
 
+@pytest.mark.slow
 def test_offline_and_replay_modes_agree(tmp_path, demo_bag, oracle):
     """The command's options in both modes on the same seed; replay goes through a real estimator node over ROS.
 

@@ -79,6 +79,7 @@ def test_make_synthetic_bag_refuses_an_existing_folder_and_an_unknown_object(tmp
     assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.slow
 def test_no_traceback_from_the_command_line(tmp_path):
     """As a user runs it: a separate process, stderr is one clear line."""
     result = subprocess.run([sys.executable, "-m", "idpose_ros.evaluate_bag", str(tmp_path / "missing")],
@@ -94,6 +95,7 @@ def test_small_pools_evaluate_the_view_counts_they_can_hold():
         usable_view_counts([4, 6], pool_size=3)
 
 
+@pytest.mark.slow
 def test_ros2_run_finds_both_commands_and_the_installed_demo_bag(workspace):
     """As `ros2 run idpose_ros evaluate_bag` runs it: the installed script on the installed demo bag."""
     prefix = workspace / "install" / "idpose_ros"
@@ -109,6 +111,7 @@ def test_ros2_run_finds_both_commands_and_the_installed_demo_bag(workspace):
     assert "/camera/image_raw [sensor_msgs/msg/Image]" in result.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["offline", "replay"])
 def test_a_missing_model_is_a_clear_error_in_both_modes(tmp_path, capsys, mode):
     """Offline loads the model here; replay's node fails to load it and says so through /diagnostics."""

@@ -20,6 +20,8 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from idpose_ros import evaluate_bag
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 DEMO_BAG = Path(__file__).resolve().parents[1] / "data" / "demo_bags" / "duck"
 NAMESPACE = f"/evaluate_bag_test_{os.getpid()}"
 TINY_SOLVER = ["azimuth_candidates=2", "probe_batch=1", "adjust_steps=0", "keep_top=1",

@@ -120,6 +120,7 @@ def test_png_views_take_grey_rgb_and_rgba(tmp_path):
         read_png_view(tmp_path / "broken.png")
 
 
+@pytest.mark.slow
 def test_the_same_views_as_a_bag_and_as_official_files_give_the_same_estimate(duck_both_ways, estimator):
     bag, official = duck_both_ways
     bag_tasks = bag.plan(EvaluationProtocol(samples=2, seed=0, view_counts=(2, 4)))
@@ -154,6 +155,7 @@ def finished(item, task, estimator, attempts: int = 1) -> JobResult:
     return JobResult(task_key(item.name, task), task, attempts, outcome, "host:1")
 
 
+@pytest.mark.slow
 def test_results_resume_and_the_report_merges_in_plan_order(tmp_path, duck_both_ways, estimator):
     """Lines written out of order, one failed, a torn last line: the rerun's view and the merged report."""
     bag, official = duck_both_ways
@@ -217,6 +219,7 @@ def test_the_cli_refuses_replay_and_bad_inputs(tmp_path, capsys):
     assert "keep_top" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_ros2_run_finds_evaluate_dataset(workspace):
     """As `ros2 run idpose_ros evaluate_dataset` runs it: the installed script, on the installed demo bag."""
     prefix = workspace / "install" / "idpose_ros"

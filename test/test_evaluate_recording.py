@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from geometry_msgs.msg import PoseStamped
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
@@ -35,6 +36,8 @@ from idpose_ros.node.flight_recorder import FlightRecorder, restored_view
 from idpose_ros.node.parameters import pipeline_settings
 from idpose_ros.view_decoding import ViewMessages
 from msg_adapters import pose_to_matrix
+
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
 
 SOLVER = ("azimuth_candidates=2", "probe_batch=1", "adjust_steps=0", "keep_top=1", "refine_steps_per_view=2",
           "average_last=1", "runner_up_steps=1")

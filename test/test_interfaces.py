@@ -12,6 +12,8 @@ import pytest
 
 from scripts import install_interfaces
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "idpose_interfaces"
 # The names and types clients rely on; the files may add fields.
@@ -33,6 +35,7 @@ import json
 import sys
 from idpose_interfaces.action import EstimatePoses
 from idpose_interfaces.msg import ViewEstimate
+
 types = {"ViewEstimate": ViewEstimate, "Goal": EstimatePoses.Goal, "Result": EstimatePoses.Result,
          "Feedback": EstimatePoses.Feedback}
 print(json.dumps({"fields": {name: kind.get_fields_and_field_types() for name, kind in types.items()},

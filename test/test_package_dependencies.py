@@ -33,10 +33,12 @@ ROSDEP_KEYS = {
     "python3-matplotlib": "python.yaml", "python3-torch": "python.yaml", "python3-transformers-pip": "python.yaml",
     "python3-rosbags-pip": "python.yaml", "python3-pybullet-pip": "python.yaml", "python3-pytest": "python.yaml",
     "python3-hypothesis": "python.yaml", "python3-yaml": "python.yaml", "python3-ruff-pip": "python.yaml",
+    "python3-scipy": "python.yaml",
 }
 # Imported module -> the dependency that provides it (None: no rosdep key, installed from requirements.txt).
 PROVIDED_BY = {
-    "numpy": "python3-numpy", "cv2": "python3-opencv", "tqdm": "python3-tqdm", "matplotlib": "python3-matplotlib",
+    "numpy": "python3-numpy", "scipy": "python3-scipy", "cv2": "python3-opencv", "tqdm": "python3-tqdm",
+    "matplotlib": "python3-matplotlib",
     "torch": "python3-torch", "transformers": "python3-transformers-pip", "rosbags": "python3-rosbags-pip",
     "pybullet": "python3-pybullet-pip", "pybullet_data": "python3-pybullet-pip", "diffusers": None,
     "safetensors": None, "ray": None, "pycolmap": None, "mcap": None,

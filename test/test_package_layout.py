@@ -5,8 +5,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from catkin_pkg.changelog import get_changelog_from_path
 from catkin_pkg.package import parse_package
+
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
 
 ROOT = Path(__file__).resolve().parents[1]
 

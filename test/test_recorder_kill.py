@@ -19,16 +19,18 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
+from node_harness import FAST_SOLVER, header
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
-from test_estimator_node import FAST_SOLVER, header
 
 from idpose_ros.node.diagnostics import STATUS_NAME
 from idpose_ros.node.result_publisher import RESULT_QOS
 from idpose_ros.recording.log_format import read_recording
 from msg_adapters import array_to_image, pose_to_matrix
+
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT = 90.0

@@ -86,6 +86,7 @@ def test_a_tabletop_bag_is_cut_out_and_scaled_by_depth(tmp_path):
     assert {view["mask_method"] for view in without.estimates[0]["details"]["views"]} <= {"threshold", "grabcut"}
 
 
+@pytest.mark.slow
 def test_replay_reads_the_same_gravity_as_offline(rolled_bag):
     """The node gets each view's gravity on its camera_orientation topic from the replay client."""
     oracle = oracle_for(SEED, SIZE)

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 # What ./run reads to install: copied into a scratch checkout, so that a test may edit them.
 INSTALL_INPUTS = ("run", "requirements.txt", "requirements-ros.txt", "requirements-test.txt",

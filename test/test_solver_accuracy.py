@@ -22,6 +22,8 @@ from idpose_core.synthetic.scenes import (
     symmetric_objects,
 )
 
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
+
 PAIRS = SolverConfig(**ORACLE_SOLVER_SETTINGS, refine_steps_per_view=100, runner_up_steps=50)
 SETS = SolverConfig(**ORACLE_SOLVER_SETTINGS, refine_steps_per_view=40, runner_up_steps=0)
 

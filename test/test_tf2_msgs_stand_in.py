@@ -5,8 +5,11 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+
+pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
 
 FRAMES = {"view_1": (0.5, -0.25, 1.0), "view_2": (-1.5, 0.0, 2.0)}
 # Publishes the FRAMES on /tf ten times a second until stopped (or 60 s), as a node under test would.
