@@ -2,7 +2,8 @@
 
 Turn each view upright (gravity) -> cut out and frame the object (preprocess_views) -> read each
 view's elevation (gravity) and the anchor's distance (depth) -> invert the model (estimate_poses)
--> poses of the upright cameras in the anchor frame -> each view's roll put back. No ROS here.
+-> poses of the upright cameras in the anchor frame -> each view's roll put back -> where views have depth,
+their poses refined by registering their object points (depth_fusion) and the object's cloud and box. No ROS here.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import numpy as np
 import torch
 
 from idpose_core.cameras import anchor_frame_poses
+from idpose_core.depth_fusion import DepthRefinement, ObjectFrame, ViewRefinement, object_frame, refine_with_depth
 from idpose_core.depth_segmentation import DepthSegmentationError, object_distance
 from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, with_roll
@@ -41,11 +43,15 @@ class PipelineSettings:
     """How to estimate: the solver's settings (``solver.anchor_polar_deg`` is the anchor camera's polar
     angle around the object, None = level; gravity overrides it), the anchor's ``object_distance``
     (metres, the scale of the published positions; depth overrides it) and ``image_size``, the side of
-    the preprocessed views the model sees."""
+    the preprocessed views the model sees; ``depth_refinement``: refine the poses of views with depth by
+    registering their object points (``idpose_core.depth_fusion``), the fused cloud thinned to
+    ``cloud_voxel_size`` (m)."""
 
     solver: SolverConfig
     object_distance: float = 1.0
     image_size: int = MODEL_IMAGE_SIZE
+    depth_refinement: bool = True
+    cloud_voxel_size: float = 0.005
 
 
 @dataclass(frozen=True)
@@ -54,7 +60,8 @@ class ViewReport:
     a more trusted source failed), its roll and polar angle from gravity and its object distance from
     depth (degrees, metres; None without gravity / depth); ``touches_border`` when the mask, in the view's
     own image, comes within ``BORDER_MARGIN_PX`` of its edge (the object is likely cut off), and
-    ``reliable`` = neither touching the border nor, for a view other than the anchor, ambiguous."""
+    ``reliable`` = neither touching the border nor, for a view other than the anchor, ambiguous; ``refinement``:
+    what depth did to its pose (None when no depth refinement ran)."""
 
     mask_method: str
     mask_note: str
@@ -63,17 +70,20 @@ class ViewReport:
     distance: float | None
     touches_border: bool
     reliable: bool
+    refinement: ViewRefinement | None = None
 
 
 @dataclass(frozen=True)
 class PipelineResult:
-    """``poses`` (N, 4, 4): camera k's real optical frame in the anchor camera's (poses[0] = identity);
+    """``poses`` (N, 4, 4): camera k's real optical frame in the anchor camera's (poses[0] = identity): its metric
+    6-DoF pose where depth refined it (``views[k].refinement.refined``), else the look-at model's;
     ``masks`` N bool (H_k, W_k): the object mask preprocessing chose, in view k's own image (the
     ``preprocessed`` masks are on the upright canvas of a de-rolled view);
     ``anchor_polar_deg`` and ``object_distance`` as used, with where each came from (``polar_source``:
     "gravity" or "parameter"; ``distance_source``: "depth" or "parameter"). ``runner_up_poses`` (N, 4, 4):
     each view's runner-up (``SolverResult.runner_up_poses``) in the same frame, NaN for the anchor and for
-    views without one."""
+    views without one. ``depth``: the depth refinement and the fused cloud, ``object``: the cloud's pose and box
+    (both None without depth on the anchor, or with ``depth_refinement`` off)."""
 
     poses: np.ndarray
     runner_up_poses: np.ndarray
@@ -85,6 +95,8 @@ class PipelineResult:
     polar_source: str
     object_distance: float
     distance_source: str
+    depth: DepthRefinement | None = None
+    object: ObjectFrame | None = None
 
 
 def viewing_ray(view: ViewInput, mask: np.ndarray) -> np.ndarray:
@@ -171,12 +183,18 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     solved = estimate_poses(predictor, preprocessed.images, solver.with_recommended(predictor.solver_defaults),
                             progress=progress, cancel=cancel, known_polar=known_polar, samples=samples)
     poses = with_roll(anchor_frame_poses(solved.rel_poses, math.radians(polar_deg), distance), np.array(rolls))
+    reports = with_ambiguity(reports, solved.ambiguous)
+    depth = refine_with_depth(views, masks, poses, settings.cloud_voxel_size) if settings.depth_refinement else None
+    if depth is not None:
+        poses = depth.poses
+        reports = [replace(report, refinement=refinement) for report, refinement in zip(reports, depth.views)]
     return PipelineResult(poses=poses, runner_up_poses=runner_up_poses(solved, polar_deg, distance, rolls),
-                          solver_result=solved, preprocessed=preprocessed, masks=masks,
-                          views=with_ambiguity(reports, solved.ambiguous),
+                          solver_result=solved, preprocessed=preprocessed, masks=masks, views=reports,
                           anchor_polar_deg=polar_deg,
                           polar_source="gravity" if anchor.polar_deg is not None else "parameter",
-                          object_distance=distance, distance_source="depth" if anchor.distance else "parameter")
+                          object_distance=distance, distance_source="depth" if anchor.distance else "parameter",
+                          depth=depth,
+                          object=None if depth is None else object_frame(depth.cloud, views[0].gravity_up))
 
 
 def result_details(result: PipelineResult) -> dict[str, Any]:
@@ -192,8 +210,9 @@ def estimate_details(views: Sequence[ViewReport], anchor_polar_deg: float, polar
                      stage_samples: Mapping[str, Sequence[int]]) -> dict[str, Any]:
     """The one layout of an estimate's details, wherever they are read from (a ``PipelineResult``, or the node's
     action result): per view the mask method (and note), gravity's roll and polar angle, the depth distance,
-    whether the mask touches the border and whether the pose is reliable; where the anchor's polar angle and
-    distance came from; the predictor samples it took (evaluated, differentiated, and both per solver stage)."""
+    whether the mask touches the border, whether the pose is reliable and what depth refinement did; where the
+    anchor's polar angle and distance came from; the predictor samples it took (evaluated, differentiated, and
+    both per solver stage)."""
     return {"views": [asdict(view) for view in views], "anchor_polar_deg": anchor_polar_deg,
             "polar_source": polar_source, "object_distance": object_distance, "distance_source": distance_source,
             "forward_samples": forward_samples, "backward_samples": backward_samples,

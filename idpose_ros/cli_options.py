@@ -36,6 +36,8 @@ def add_estimator_arguments(parser: argparse.ArgumentParser, preset: str = Estim
                        help="override one of the node's solver parameters (repeatable)")
     group.add_argument("--image-size", type=int, default=default.image_size,
                        help=f"side of the preprocessed views the model sees (default {default.image_size})")
+    group.add_argument("--depth-refinement", action=argparse.BooleanOptionalAction, default=default.depth_refinement,
+                       help="refine the poses of views with depth by registering their object points (default on)")
     group.add_argument("--node", default=default.node,
                        help="replay: fully qualified name of a running estimator node (default: start one)")
     group.add_argument("--timeout", type=float, default=default.timeout,
@@ -46,7 +48,8 @@ def estimator_options(args: argparse.Namespace) -> EstimatorOptions:
     """The options ``add_estimator_arguments`` parsed."""
     return EstimatorOptions(mode=args.mode, model_path=args.model_path, device=args.device, precision=args.precision,
                             preset=args.preset, variant=args.variant, solver_params=tuple(args.solver_param),
-                            image_size=args.image_size, node=args.node, timeout=args.timeout)
+                            image_size=args.image_size, depth_refinement=args.depth_refinement, node=args.node,
+                            timeout=args.timeout)
 
 
 def add_ground_truth_arguments(parser: argparse.ArgumentParser) -> None:

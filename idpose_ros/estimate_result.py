@@ -10,14 +10,16 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import Pose
+from geometry_msgs.msg import Pose, PoseStamped, Vector3
+from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
+from idpose_core.depth_fusion import ViewRefinement
 from idpose_core.evaluation.estimator import ViewSetEstimate
 from idpose_core.pipeline import PipelineResult, ViewReport, estimate_details
 from idpose_interfaces.action import EstimatePoses
 from idpose_interfaces.msg import SolverStage, ViewEstimate
-from msg_adapters import matrix_to_pose, pose_to_matrix, poses_to_pose_array
+from msg_adapters import matrix_to_pose, points_to_cloud, pose_to_matrix, poses_to_pose_array
 
 Result = EstimatePoses.Result
 
@@ -37,6 +39,27 @@ def no_pose() -> Pose:
     return pose
 
 
+def depth_fields(refinement: ViewRefinement | None) -> dict[str, Any]:
+    """A ViewEstimate's depth fields: what depth did to the view's pose (empty note and NaNs when no refinement
+    ran)."""
+    if refinement is None:
+        return {"depth_refined": False, "depth_note": "", "depth_fitness": math.nan, "depth_inlier_rmse": math.nan,
+                "depth_rotation_change_deg": 0.0, "depth_translation_change": 0.0}
+    return {"depth_refined": refinement.refined, "depth_note": refinement.note,
+            "depth_fitness": refinement.fitness, "depth_inlier_rmse": refinement.inlier_rmse,
+            "depth_rotation_change_deg": refinement.rotation_change_deg,
+            "depth_translation_change": refinement.translation_change}
+
+
+def refinement_of(view: ViewEstimate) -> ViewRefinement | None:
+    """The ViewRefinement a ViewEstimate's depth fields carry (None when no refinement ran: an empty note)."""
+    if not view.depth_note and not view.depth_refined:
+        return None
+    return ViewRefinement(view.depth_refined, view.depth_note, float(view.depth_fitness),
+                          float(view.depth_inlier_rmse), float(view.depth_rotation_change_deg),
+                          float(view.depth_translation_change))
+
+
 def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[ViewEstimate]:
     """One ViewEstimate per view (the anchor first, its confidence 1), with the view's image header."""
     solved = result.solver_result
@@ -53,15 +76,29 @@ def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[Vi
             roll_deg=_nan_if_none(view.roll_deg), polar_deg=_nan_if_none(view.polar_deg),
             mask_method=view.mask_method, mask_note=view.mask_note,
             polar_source="gravity" if view.polar_deg is not None else "",
-            object_distance=_nan_if_none(view.distance), touches_border=view.touches_border, reliable=view.reliable))
+            object_distance=_nan_if_none(view.distance), touches_border=view.touches_border, reliable=view.reliable,
+            **depth_fields(view.refinement)))
     return estimates
+
+
+def object_messages(result: PipelineResult, frame_id: str, stamp) -> tuple[PointCloud2, PoseStamped, Vector3, str]:
+    """The object's fused cloud, box pose and sides, and where the box's axes come from, in the anchor's frame at
+    its ``stamp``: empty messages (and an empty source) when the estimate has no cloud."""
+    header = Header(frame_id=frame_id, stamp=stamp)
+    if result.depth is None or result.object is None:
+        return PointCloud2(header=header), PoseStamped(header=header), Vector3(), ""
+    cloud = points_to_cloud(result.depth.cloud.points, result.depth.cloud.colours, frame_id, stamp)
+    size = Vector3(x=float(result.object.size[0]), y=float(result.object.size[1]), z=float(result.object.size[2]))
+    return cloud, PoseStamped(header=header, pose=matrix_to_pose(result.object.pose)), size, result.object.axes_source
 
 
 def result_message(result: PipelineResult, headers: Sequence[Header], frame_id: str, run_id: int,
                    seconds: float) -> EstimatePoses.Result:
-    """A SUCCEEDED result: the poses as ``~/poses`` publishes them (the anchor's stamp, ``frame_id``) and one
-    ViewEstimate per view; ``headers`` are the views' image headers, the anchor first."""
+    """A SUCCEEDED result: the poses as ``~/poses`` publishes them (the anchor's stamp, ``frame_id``), one
+    ViewEstimate per view and the object (``object_messages``); ``headers`` are the views' image headers, the
+    anchor first."""
     solved = result.solver_result
+    cloud, pose, size, axes = object_messages(result, frame_id, headers[0].stamp)
     return Result(
         error_code=Result.SUCCEEDED, run_id=run_id,
         poses=poses_to_pose_array(result.poses, frame_id, headers[0].stamp),
@@ -71,7 +108,7 @@ def result_message(result: PipelineResult, headers: Sequence[Header], frame_id: 
         backward_samples=solved.backward_samples,
         stages=[SolverStage(name=name, forward_samples=forward, backward_samples=backward)
                 for name, (forward, backward) in solved.stage_samples.items()],
-        seconds=float(seconds))
+        seconds=float(seconds), object_cloud=cloud, object_pose=pose, object_size=size, object_axes=axes)
 
 
 def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
@@ -79,7 +116,7 @@ def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
     rounded to the message's float32)."""
     views = [ViewReport(view.mask_method, view.mask_note, _none_if_nan(view.roll_deg), _none_if_nan(view.polar_deg),
                         _none_if_nan(view.object_distance), touches_border=view.touches_border,
-                        reliable=view.reliable) for view in result.views]
+                        reliable=view.reliable, refinement=refinement_of(view)) for view in result.views]
     return estimate_details(views, result.anchor_polar_deg, result.anchor_polar_source, result.object_distance,
                             result.distance_source, result.forward_samples, result.backward_samples,
                             {stage.name: (stage.forward_samples, stage.backward_samples) for stage in result.stages})

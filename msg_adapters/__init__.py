@@ -1,5 +1,5 @@
 """ROS messages <-> numpy: images, depth and masks, compressed images, poses, pose arrays, TF transforms, RViz
-markers, and what sensors say about a view (intrinsics, gravity, orientation).
+markers, coloured point clouds, and what sensors say about a view (intrinsics, gravity, orientation).
 
 Imports numpy, OpenCV and the ROS message packages only (no torch, no idpose_core), so the
 node's message handling can be tested and reused without a model.
@@ -13,7 +13,8 @@ from msg_adapters.errors import AdapterError
 from msg_adapters.headers import stamp_nanoseconds
 from msg_adapters.image_size import ImageTooLarge, encoded_size
 from msg_adapters.images import array_to_image, image_to_array, image_to_rgb
-from msg_adapters.markers import camera_markers
+from msg_adapters.markers import box_marker, camera_markers
+from msg_adapters.point_clouds import cloud_to_points, points_to_cloud
 from msg_adapters.poses import matrix_to_pose, pose_to_matrix, poses_to_pose_array
 from msg_adapters.sensors import imu_acceleration, orientation_rotation
 from msg_adapters.transforms import pose_array_to_transforms
@@ -24,9 +25,11 @@ __all__ = [
     "Encoding",
     "ImageTooLarge",
     "array_to_image",
+    "box_marker",
     "camera_info_to_matrix",
     "camera_markers",
     "check_image",
+    "cloud_to_points",
     "compressed_to_rgb",
     "depth_to_image",
     "encoded_size",
@@ -40,6 +43,7 @@ __all__ = [
     "matrix_to_pose",
     "pose_array_to_transforms",
     "orientation_rotation",
+    "points_to_cloud",
     "pose_to_matrix",
     "poses_to_pose_array",
     "stamp_nanoseconds",

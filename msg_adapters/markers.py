@@ -82,3 +82,14 @@ def camera_markers(
             color=ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0), text=str(label),
         ))
     return MarkerArray(markers=markers)
+
+
+def box_marker(pose, size, frame_id: str, stamp, *, namespace: str = "object", marker_id: int = 0,
+               rgba: tuple[float, float, float, float] = (1.0, 0.6, 0.1, 0.35)) -> Marker:
+    """A translucent CUBE marker: the box of sides ``size`` (3,) metres at ``pose`` (4, 4)."""
+    sides = np.asarray(size, dtype=np.float64)
+    if sides.shape != (3,) or not (np.isfinite(sides).all() and (sides >= 0).all()):
+        raise AdapterError(f"size must be 3 non-negative lengths, got {sides.tolist()}")
+    return Marker(header=make_header(frame_id, stamp), ns=namespace, id=marker_id, type=Marker.CUBE,
+                  action=Marker.ADD, pose=matrix_to_pose(pose), scale=Vector3(x=sides[0], y=sides[1], z=sides[2]),
+                  color=ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3])))

@@ -17,6 +17,8 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import Log
+from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -26,7 +28,8 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from idpose_ros.node.estimator_node import EstimatorNode
+from idpose_interfaces.action import EstimatePoses
+from idpose_ros.node.estimator_node import SERVICE_QOS, EstimatorNode
 from idpose_ros.node.result_publisher import RESULT_QOS
 from msg_adapters import array_to_image
 
@@ -119,3 +122,36 @@ class Harness:
         self.thread.join(5.0)
         self.probe.destroy_node()
         self.node.destroy_node()
+
+
+class ActionProbe:
+    """An ActionClient for the harness's node, recording every feedback message per goal."""
+
+    def __init__(self, h: Any) -> None:
+        self.h = h
+        self.client = ActionClient(h.probe, EstimatePoses, "idpose_estimator/estimate_poses",
+                                   goal_service_qos_profile=SERVICE_QOS, result_service_qos_profile=SERVICE_QOS,
+                                   cancel_service_qos_profile=SERVICE_QOS)
+        assert self.client.wait_for_server(TIMEOUT), "the action server"
+        self.feedback: list[EstimatePoses.Feedback] = []
+        self._lock = threading.Lock()
+
+    def _on_feedback(self, message: Any) -> None:
+        with self._lock:
+            self.feedback.append(message.feedback)
+
+    def send(self, images: list[Image] | None = None, preset: str = "") -> ClientGoalHandle:
+        future = self.client.send_goal_async(EstimatePoses.Goal(images=images or [], preset=preset),
+                                             feedback_callback=self._on_feedback)
+        handle = self.h.wait_for(future.result, "the goal response")
+        assert handle.accepted, "every goal is accepted; one that cannot run ends at once with its reason"
+        return handle
+
+    def result(self, handle: ClientGoalHandle, timeout: float = TIMEOUT) -> tuple[int, EstimatePoses.Result]:
+        """(goal status, result) once the goal has ended."""
+        future = handle.get_result_async()
+        response = self.h.wait_for(future.result, "the goal result", timeout=timeout)
+        return response.status, response.result
+
+    def run(self, images: list[Image] | None = None, preset: str = "") -> tuple[int, EstimatePoses.Result]:
+        return self.result(self.send(images, preset))

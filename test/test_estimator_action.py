@@ -16,13 +16,10 @@ import pytest
 from action_msgs.msg import GoalStatus
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
-from node_harness import TIMEOUT, header, mixed_encodings
-from rclpy.action import ActionClient
-from rclpy.action.client import ClientGoalHandle
+from node_harness import TIMEOUT, ActionProbe, header, mixed_encodings
 from sensor_msgs.msg import Image
 
 from idpose_interfaces.action import EstimatePoses
-from idpose_ros.node.estimator_node import SERVICE_QOS
 from msg_adapters import pose_to_matrix
 
 pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
@@ -30,39 +27,6 @@ pytestmark = pytest.mark.slow  # every test here starts a node or a process, or 
 Result = EstimatePoses.Result
 LONG_RUN = dict(refine_steps_per_view=1_000_000, average_last=1)  # runs until cancelled
 BURST = 50
-
-
-class ActionProbe:
-    """An ActionClient for the harness's node, recording every feedback message per goal."""
-
-    def __init__(self, h: Any) -> None:
-        self.h = h
-        self.client = ActionClient(h.probe, EstimatePoses, "idpose_estimator/estimate_poses",
-                                   goal_service_qos_profile=SERVICE_QOS, result_service_qos_profile=SERVICE_QOS,
-                                   cancel_service_qos_profile=SERVICE_QOS)
-        assert self.client.wait_for_server(TIMEOUT), "the action server"
-        self.feedback: list[EstimatePoses.Feedback] = []
-        self._lock = threading.Lock()
-
-    def _on_feedback(self, message: Any) -> None:
-        with self._lock:
-            self.feedback.append(message.feedback)
-
-    def send(self, images: list[Image] | None = None, preset: str = "") -> ClientGoalHandle:
-        future = self.client.send_goal_async(EstimatePoses.Goal(images=images or [], preset=preset),
-                                             feedback_callback=self._on_feedback)
-        handle = self.h.wait_for(future.result, "the goal response")
-        assert handle.accepted, "every goal is accepted; one that cannot run ends at once with its reason"
-        return handle
-
-    def result(self, handle: ClientGoalHandle, timeout: float = TIMEOUT) -> tuple[int, EstimatePoses.Result]:
-        """(goal status, result) once the goal has ended."""
-        future = handle.get_result_async()
-        response = self.h.wait_for(future.result, "the goal result", timeout=timeout)
-        return response.status, response.result
-
-    def run(self, images: list[Image] | None = None, preset: str = "") -> tuple[int, EstimatePoses.Result]:
-        return self.result(self.send(images, preset))
 
 
 def image_messages(object_views) -> list[Image]:

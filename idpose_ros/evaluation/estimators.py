@@ -24,6 +24,7 @@ from idpose_ros.evaluation.replay import ReplayEstimator
 from idpose_ros.node.parameters import SOLVER_PARAMETERS, parameter_table, pipeline_settings, solver_config
 
 NODE_BOUNDS = {name: spec["bounds"] for name, _, spec in parameter_table()}
+NODE_DEFAULTS = {name: default for name, default, _ in parameter_table()}
 MODES = ("offline", "replay")
 
 
@@ -32,7 +33,8 @@ class EstimatorOptions:
     """The model and solver options of an evaluation, as the command lines take them.
 
     ``solver_params`` are ``NAME=VALUE`` overrides of the node's solver parameters; ``node`` and
-    ``timeout`` apply to ``mode="replay"`` (a running node's name, or None to start one here).
+    ``timeout`` apply to ``mode="replay"`` (a running node's name, or None to start one here);
+    ``depth_refinement`` False keeps the diffusion poses of views with depth (the node's parameter).
     """
 
     mode: str = "offline"
@@ -43,12 +45,14 @@ class EstimatorOptions:
     variant: str | None = None
     solver_params: tuple[str, ...] = ()
     image_size: int = MODEL_IMAGE_SIZE
+    depth_refinement: bool = True
     node: str | None = None
     timeout: float = 3600.0
 
     def node_values(self) -> dict[str, Any]:
         """The node's parameter values that shape an estimate: the solver's (the preset, the variant and
-        the overrides) and ``image_size``; both modes run on exactly these. ValueError names a bad one."""
+        the overrides), ``image_size`` and the depth refinement's; both modes run on exactly these. ValueError
+        names a bad one."""
         config = SolverConfig.preset(self.preset)
         values = {"preset": self.preset, **{name: getattr(config, name) for name in SOLVER_PARAMETERS}}
         if self.variant is not None:
@@ -67,7 +71,8 @@ class EstimatorOptions:
         low, high = NODE_BOUNDS["image_size"]
         if not low <= self.image_size <= high:
             raise ValueError(f"--image-size must be in [{low}, {high}] pixels, got {self.image_size}")
-        return {**values, "image_size": self.image_size}
+        return {**values, "image_size": self.image_size, "depth_refinement": self.depth_refinement,
+                "cloud_voxel_size": NODE_DEFAULTS["cloud_voxel_size"]}
 
 
 class OfflineEstimator:

@@ -73,6 +73,12 @@ class NodeSettings:
         bounds=(0.001, 1000.0)))
     image_size: int = field(default=MODEL_IMAGE_SIZE, metadata=_spec(
         "side in pixels of the preprocessed views the model sees (Zero-1-to-3: 256)", bounds=(16, 1024)))
+    depth_refinement: bool = field(default=True, metadata=_spec(
+        "refine the poses of views with depth and intrinsics by registering their object points onto the "
+        "anchor's (metric 6-DoF poses, gated per view), and publish the fused object on ~/object_cloud and "
+        "~/object_pose"))
+    cloud_voxel_size: float = field(default=0.005, metadata=_spec(
+        "voxel (m) the published object cloud is thinned to", bounds=(0.0005, 0.5)))
     anchor_frame: str = field(default="", metadata=_spec(
         "frame_id of the published poses; empty = the anchor image's header.frame_id"))
     publish_tf: bool = field(default=True, metadata=_spec(
@@ -195,7 +201,8 @@ def solver_config(values: dict[str, Any]) -> SolverConfig:
 
 def pipeline_settings(values: dict[str, Any]) -> PipelineSettings:
     """What one estimate runs on, from the node's parameter values: solver, object distance, image size."""
-    return PipelineSettings(solver_config(values), values["object_distance"], values["image_size"])
+    return PipelineSettings(solver_config(values), values["object_distance"], values["image_size"],
+                            values["depth_refinement"], values["cloud_voxel_size"])
 
 
 def node_settings(values: dict[str, Any]) -> NodeSettings:

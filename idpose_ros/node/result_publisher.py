@@ -1,16 +1,17 @@
-"""Where an estimate's result goes: ``~/poses``, ``~/markers``, ``~/views`` (latched) and, when on, TF."""
+"""Where an estimate's result goes: ``~/poses``, ``~/markers``, ``~/views``, ``~/object_cloud``, ``~/object_pose``
+(latched) and, when on, TF."""
 from __future__ import annotations
 
-from geometry_msgs.msg import PoseArray
+from geometry_msgs.msg import PoseArray, PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from idpose_core.pipeline import PipelineResult, views_mosaic
 from idpose_interfaces.action import EstimatePoses
 from idpose_ros.node.tf_broadcast import PoseBroadcaster
-from msg_adapters import array_to_image, camera_markers
+from msg_adapters import array_to_image, box_marker, camera_markers
 
 MARKER_DEPTH = 0.15  # frustum depth as a share of object_distance
 # Reliable and latched: a subscriber that joins late still gets the last result.
@@ -24,15 +25,25 @@ class ResultPublisher:
         self._poses = node.create_publisher(PoseArray, "~/poses", RESULT_QOS)
         self._markers = node.create_publisher(MarkerArray, "~/markers", RESULT_QOS)
         self._views = node.create_publisher(Image, "~/views", RESULT_QOS)
+        self._cloud = node.create_publisher(PointCloud2, "~/object_cloud", RESULT_QOS)
+        self._object_pose = node.create_publisher(PoseStamped, "~/object_pose", RESULT_QOS)
         self._tf = PoseBroadcaster(node, node.get_logger().warning) if publish_tf else None
 
     def publish(self, result: PipelineResult, message: EstimatePoses.Result, tf_prefix: str) -> None:
-        """Poses (the result's own PoseArray), markers, the views the model saw and TF; the markers are sized by
-        the distance the poses use (measured from depth when the anchor had it)."""
+        """Poses (the result's own PoseArray), markers, the views the model saw, the object's cloud and pose (the
+        result's own, only when the estimate has a cloud: an estimate without depth leaves the last ones) and TF;
+        the markers are sized by the distance the poses use (measured from depth when the anchor had it) and add
+        the object's box when there is one."""
         poses = message.poses
         self._poses.publish(poses)
-        self._markers.publish(camera_markers(result.poses, poses.header.frame_id, poses.header.stamp,
-                                             depth=MARKER_DEPTH * result.object_distance))
+        markers = camera_markers(result.poses, poses.header.frame_id, poses.header.stamp,
+                                 depth=MARKER_DEPTH * result.object_distance)
+        if result.object is not None:
+            markers.markers.append(box_marker(result.object.pose, result.object.size, poses.header.frame_id,
+                                              poses.header.stamp))
+            self._cloud.publish(message.object_cloud)
+            self._object_pose.publish(message.object_pose)
+        self._markers.publish(markers)
         mosaic = array_to_image(views_mosaic(result.preprocessed.images), "rgb8")
         mosaic.header = poses.header
         self._views.publish(mosaic)

@@ -1,0 +1,82 @@
+"""The node's depth outputs seen by a real rclpy subscriber and client: after an estimate on tabletop views with depth
+and intrinsics, ~/object_cloud and ~/object_pose carry the object in the anchor's frame, its box is among the
+markers, and the action result holds the same cloud and each view's depth fields.
+
+The model is the tiny random one (its poses are noise): the anchor's own points make the cloud whatever the other
+view's registration gives, so the cloud's place is checked against the rendered truth.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from action_msgs.msg import GoalStatus
+from geometry_msgs.msg import PoseStamped
+from node_harness import ActionProbe, header
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from visualization_msgs.msg import Marker
+
+from idpose_core.cameras import pinhole_camera_matrix
+from idpose_core.synthetic.scenes import demo_objects
+from idpose_core.synthetic.tabletop import TabletopRenderer, challenge_camera, random_layout
+from idpose_ros.node.result_publisher import RESULT_QOS
+from msg_adapters import array_to_image, cloud_to_points, matrix_to_camera_info, pose_to_matrix
+
+pytestmark = pytest.mark.slow  # starts a node
+
+SIZE, FOV = 96, 60.0
+CAMERAS = np.radians([[60.0, 20.0], [55.0, 70.0]])
+DISTANCE = 0.55
+
+
+@pytest.fixture(scope="module")
+def tabletop():
+    """Two renders of the lego brick on its table: (rgb, depth, mask) each, and the cameras (optical-to-world)."""
+    lego = next(spec for spec in demo_objects() if spec.name == "lego")
+    cameras = [challenge_camera(np.array([polar, azimuth, DISTANCE])) for polar, azimuth in CAMERAS]
+    with TabletopRenderer(random_layout(lego, np.random.default_rng(5), 0.0), SIZE, FOV) as renderer:
+        frames = [renderer.render(camera) for camera in cameras]
+    return frames, cameras
+
+
+def test_an_estimate_with_depth_publishes_the_object(harness, tabletop, wait_for):
+    frames, cameras = tabletop
+    h = harness(capture_mode="on_request")
+    clouds: list[PointCloud2] = []
+    poses: list[PoseStamped] = []
+    h.probe.create_subscription(PointCloud2, "idpose_estimator/object_cloud", clouds.append, RESULT_QOS)
+    h.probe.create_subscription(PoseStamped, "idpose_estimator/object_pose", poses.append, RESULT_QOS)
+    depth = h.probe.create_publisher(Image, "depth", 10)
+    info = h.probe.create_publisher(CameraInfo, "camera_info", 10)
+    wait_for(lambda: depth.get_subscription_count() and info.get_subscription_count(), "the input subscriptions")
+    info.publish(matrix_to_camera_info(pinhole_camera_matrix(SIZE, SIZE, FOV), SIZE, SIZE, header("cam", 1)))
+    for k, frame in enumerate(frames):
+        stamp = header("cam", 10 + k)
+        depth.publish(array_to_image(frame.depth, "32FC1", stamp))
+        alpha = (frame.target_mask * 255).astype(np.uint8)
+        before = h.node.status().images_received
+        h.send(array_to_image(np.dstack([frame.rgb, alpha]), "rgba8", stamp))
+        wait_for(lambda before=before: h.node.status().images_received == before + 1, "the image")
+        assert h.call("capture").success
+    wait_for(lambda: all(view.input.depth is not None for view in h.node._buffer.snapshot()), "both depth images")
+
+    status, result = ActionProbe(h).run()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.error_message
+    (cloud,) = wait_for(lambda: clouds, "the object cloud")
+    (pose,) = wait_for(lambda: poses, "the object pose")
+    assert cloud == result.object_cloud and pose == result.object_pose, "the result holds what the topics publish"
+    assert cloud.header == result.poses.header and pose.header == result.poses.header
+    points, colours = cloud_to_points(cloud)
+    truth = np.linalg.inv(cameras[0])[:3, 3]  # the object's centre (the world origin) in the anchor's frame
+    assert len(points) > 50 and colours.dtype == np.uint8
+    assert np.linalg.norm(points - truth, axis=1).max() < 0.12, "every point on the 20 cm object"
+    assert np.linalg.norm(pose_to_matrix(pose.pose)[:3, 3] - truth) < 0.05
+    assert result.object_axes == "anchor" and 0.05 < result.object_size.x < 0.25
+    anchor, other = result.views
+    assert (anchor.depth_refined, anchor.depth_note) == (False, "the anchor") and math.isnan(anchor.depth_fitness)
+    assert other.depth_refined or other.depth_note.startswith("depth registration rejected: ")
+    assert 0.0 <= other.depth_fitness <= 1.0
+    markers = wait_for(lambda: h.markers, "the markers")[-1].markers
+    (box,) = [marker for marker in markers if marker.type == Marker.CUBE]
+    assert box.pose == pose.pose and box.header == pose.header
