@@ -14,12 +14,12 @@ from geometry_msgs.msg import Pose, PoseStamped, Vector3
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from idpose_core.depth_fusion import ViewRefinement
+from idpose_core.depth_fusion import ObjectCloud, ViewRefinement
 from idpose_core.evaluation.estimator import ViewSetEstimate
 from idpose_core.pipeline import PipelineResult, ViewReport, estimate_details
 from idpose_interfaces.action import EstimatePoses
 from idpose_interfaces.msg import SolverStage, ViewEstimate
-from msg_adapters import matrix_to_pose, points_to_cloud, pose_to_matrix, poses_to_pose_array
+from msg_adapters import cloud_to_points, matrix_to_pose, points_to_cloud, pose_to_matrix, poses_to_pose_array
 
 Result = EstimatePoses.Result
 
@@ -123,9 +123,11 @@ def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
 
 
 def view_set_estimate(result: EstimatePoses.Result) -> ViewSetEstimate:
-    """The evaluators' view of a SUCCEEDED result: poses, per non-anchor view score and ambiguity, details."""
+    """The evaluators' view of a SUCCEEDED result: poses, per non-anchor view score and ambiguity, details and the
+    object cloud (when the result has one)."""
     others = result.views[1:]
+    cloud = ObjectCloud(*cloud_to_points(result.object_cloud)) if result.object_axes else None
     return ViewSetEstimate(poses=np.stack([pose_to_matrix(pose) for pose in result.poses.poses]),
                            scores=np.array([view.score for view in others], dtype=np.float64),
                            ambiguous=np.array([view.ambiguous for view in others], dtype=bool),
-                           seconds=float(result.seconds), details=result_details(result))
+                           seconds=float(result.seconds), details=result_details(result), cloud=cloud)

@@ -9,8 +9,9 @@ cameras_<sample>.png into ``--out``. A flight recording of the node (``record_di
 its own estimates: each is estimated again and scored beside the result the node published. With
 ``--baselines colmap features`` the classical baselines run
 on the same views of every estimate and get their own rows. Offline, ``--save-views DIR`` writes each
-used view's mask and the crop the model saw into DIR/views, and a bag with true target masks gets
-each view's mask IoU in the report.
+used view's mask and the crop the model saw into DIR/views and each estimate's fused object cloud (where
+the anchor had depth) into DIR/clouds/<sample>_<n>.ply, and a bag with true target masks gets each view's
+mask IoU in the report.
 
 A thin front end: the protocol is ``idpose_core.evaluation``, the bag adapter
 ``idpose_ros.evaluation.bag_evaluation``, the report ``idpose_ros.evaluation.bag_report``.
@@ -50,7 +51,8 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, EvaluationPr
     parser.add_argument("--out", type=Path, default=Path("evaluation"), help="report folder (default ./evaluation)")
     parser.add_argument("--save-views", type=Path, default=None, metavar="DIR",
                         help="offline: write DIR/views/<view id>_mask.png (the mask in the original image) and "
-                             "<view id>_crop.png (what the model saw) for every view an estimate used")
+                             "<view id>_crop.png (what the model saw) for every view an estimate used, and "
+                             "DIR/clouds/<sample>_<n>.ply, each estimate's fused object cloud (with depth)")
     add_protocol_arguments(parser)
     add_baseline_arguments(parser)
     add_ground_truth_arguments(parser)
@@ -97,7 +99,8 @@ def finish(args: argparse.Namespace, evaluation) -> int:
     print(table)
     print(f"report: {args.out / 'report.md'}, {args.out / 'report.json'}")
     if args.save_views is not None:
-        print(f"views: {args.save_views / 'views'}")
+        print(f"views: {args.save_views / 'views'}" + (f", clouds: {args.save_views / 'clouds'}"
+                                                      if (args.save_views / "clouds").is_dir() else ""))
     if evaluation.failures:
         total = len(evaluation.failures) + len(evaluation.estimates)
         print(f"evaluate_bag: {len(evaluation.failures)} of {total} estimates failed (listed in the report)",

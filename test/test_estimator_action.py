@@ -7,7 +7,6 @@ nothing here checks accuracy.
 from __future__ import annotations
 
 import math
-import threading
 import time
 from typing import Any
 

@@ -1,4 +1,5 @@
-"""evaluate_bag --save-views on a real tabletop bag: masks in the original pixels, crops, and IoU against the truth.
+"""evaluate_bag --save-views on a real tabletop bag: masks in the original pixels, crops, IoU against the truth, and
+the fused object cloud as a PLY file.
 
 The bag is rolled (cameras turned up to 35 deg about their axes, gravity on the Imu topic), so the pipeline
 de-rolls every view and the saved masks must be mapped back to the images' own pixels to match the true
@@ -10,6 +11,7 @@ import json
 import cv2
 import numpy as np
 import pytest
+from plyfile import PlyData
 
 from idpose_core.evaluation.picks import draw_picks
 from idpose_core.evaluation.protocol import EvaluationProtocol
@@ -69,6 +71,20 @@ def test_every_used_view_has_its_mask_in_the_original_pixels_and_its_crop(bag, s
         assert crop.shape == (64, 64, 3) and (crop == 255).all(axis=-1).mean() > 0.2  # object on white
     assert sorted(p.name for p in (out / "saved" / "views").iterdir()) == sorted(
         f"{v}_{kind}.png" for v in used for kind in ("crop", "mask"))
+
+
+def test_the_estimate_s_object_cloud_is_saved_as_ply(saved):
+    """The cloud of pick 0 at n = 3, in the anchor's optical frame: around the object centre the depth measured."""
+    run, out = saved
+    (estimate,) = run.estimates
+    assert sorted(p.name for p in (out / "saved" / "clouds").iterdir()) == ["0_3.ply"]
+    vertices = PlyData.read(str(out / "saved" / "clouds" / "0_3.ply"))["vertex"]
+    assert [p.name for p in vertices.properties] == ["x", "y", "z", "red", "green", "blue"]
+    points = np.column_stack([vertices["x"], vertices["y"], vertices["z"]])
+    assert len(points) > 50
+    centre = points.mean(axis=0)
+    assert np.linalg.norm(centre) == pytest.approx(estimate["details"]["object_distance"], abs=0.1)
+    assert np.linalg.norm(points - centre, axis=1).max() < 0.2, "the points of one 20 cm object"
 
 
 def test_the_report_gives_each_view_its_mask_iou_and_the_mean_and_worst(bag, saved):

@@ -7,6 +7,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from idpose_core.depth_fusion import ObjectCloud
 from idpose_core.solver import Progress
 from idpose_core.view_input import ViewInput
 
@@ -21,6 +22,7 @@ class ViewSetEstimate:
     angles and rolls, the depth distance, where the anchor's polar angle and distance came from). An estimator
     that runs the pipeline in this process also gives ``masks``, n bool (H_k, W_k) object masks in each view's
     own image, and ``crops`` (n, S, S, 3) uint8, the preprocessed images the model saw (empty otherwise).
+    ``cloud``: the object's points fused in the anchor's frame, where the anchor had depth (None otherwise).
     """
 
     poses: np.ndarray
@@ -30,6 +32,7 @@ class ViewSetEstimate:
     details: dict[str, Any] = field(default_factory=dict)
     masks: tuple[np.ndarray, ...] = ()
     crops: np.ndarray | None = None
+    cloud: ObjectCloud | None = None
 
 
 class ViewSetEstimator(Protocol):

@@ -96,7 +96,8 @@ class OfflineEstimator:
         solved = result.solver_result
         return ViewSetEstimate(result.poses, np.asarray(solved.scores), np.asarray(solved.ambiguous),
                                time.perf_counter() - start, result_details(result), tuple(result.masks),
-                               view_crops(result.preprocessed.images))
+                               view_crops(result.preprocessed.images),
+                               None if result.depth is None else result.depth.cloud)
 
     def close(self) -> None:
         """Nothing to release: the model goes with the object."""

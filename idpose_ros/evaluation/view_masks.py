@@ -1,11 +1,14 @@
-"""What the offline pipeline made of each view of a bag: its masks saved as files, and scored against true masks.
+"""What the offline pipeline made of each view of a bag: its masks saved as files, and scored against true masks;
+each estimate's fused object cloud saved too.
 
 ``--save-views DIR`` writes, for every view an estimate used, ``DIR/views/<view id>_mask.png`` (the object
 mask in the view's own image, mono8 0/255; a de-rolled view's mask mapped back to its pixels) and
 ``DIR/views/<view id>_crop.png`` (the preprocessed image the model saw; a view in several estimates keeps the
 crop of the last one, which the protocol's order makes the largest view set of its last pick, since the shared
 window depends on the set). When the bag carries true target masks (``GroundTruthOptions.true_mask_topic``),
-each view's mask IoU is recorded. Both need the masks, which only the offline estimator gives.
+each view's mask IoU is recorded. Both need the masks, which only the offline estimator gives. An estimate with an
+object cloud (its anchor had depth) writes it as ``DIR/clouds/<sample>_<n>.ply`` (x, y, z in metres in the anchor's
+optical frame, red, green, blue).
 """
 from __future__ import annotations
 
@@ -15,9 +18,11 @@ from typing import Any
 
 import cv2
 import numpy as np
+from plyfile import PlyData, PlyElement
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
+from idpose_core.depth_fusion import ObjectCloud
 from idpose_core.evaluation.protocol import EstimateTask
 from idpose_core.evaluation.run import EstimateOutcome
 from idpose_core.preprocessing import mask_iou
@@ -61,7 +66,8 @@ def read_true_masks(bag: str | Path, topic: str, views: BagViews, view_ids: set[
 @dataclass
 class ViewMasks:
     """Takes each estimate's outcome (``evaluate_tasks``'s ``on_estimate``): writes the views' masks and crops
-    under ``out / "views"`` when ``out`` is set, and the mask IoU of every view with a true mask (``ious``)."""
+    under ``out / "views"`` and its object cloud under ``out / "clouds"`` when ``out`` is set, and the mask IoU of
+    every view with a true mask (``ious``)."""
 
     out: Path | None = None
     true_masks: dict[int, np.ndarray] = field(default_factory=dict)
@@ -74,6 +80,9 @@ class ViewMasks:
         folder = None if self.out is None else self.out / "views"
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
+            if estimate.cloud is not None:
+                (self.out / "clouds").mkdir(exist_ok=True)
+                write_ply(self.out / "clouds" / f"{task.sample}_{task.n}.ply", estimate.cloud)
         for k, view_id in enumerate(task.views):
             mask = estimate.masks[k]
             if view_id in self.true_masks:
@@ -93,6 +102,17 @@ class ViewMasks:
         values = list(self.ious.values())
         return {"true_mask_topic": topic, "views": len(values), "mean": float(np.mean(values)),
                 "worst": float(np.min(values)), "per_view": dict(sorted(self.ious.items()))}
+
+
+def write_ply(path: Path, cloud: ObjectCloud) -> None:
+    """Write ``cloud`` as a binary PLY of vertices (x, y, z float32, red, green, blue uint8)."""
+    vertices = np.empty(len(cloud.points), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "u1"),
+                                                  ("green", "u1"), ("blue", "u1")])
+    for k, axis in enumerate("xyz"):
+        vertices[axis] = cloud.points[:, k]
+    for k, channel in enumerate(("red", "green", "blue")):
+        vertices[channel] = cloud.colours[:, k]
+    PlyData([PlyElement.describe(vertices, "vertex")]).write(str(path))
 
 
 def write_png(path: Path, image: np.ndarray) -> None:
