@@ -2,6 +2,7 @@
 
 GICP, not point-to-plane ICP: on the tabletop views of the six demo objects, from seeds 15 deg off, it
 lands within 5 deg for 11 of 12 pairs where point-to-plane ICP does for 7 (a partial view's planes let it slide).
+Geometry alone cannot tell a smooth object's turns apart: the gate in ``refinement`` and the diffusion seed do.
 """
 from __future__ import annotations
 
@@ -13,9 +14,11 @@ import small_gicp
 NEIGHBOURS = 10  # points for each normal
 ITERATIONS = 40  # per stage
 # Shares of the object's extent: how far apart points may match, stage by stage. Far matches pull a seed 15-30 deg
-# off into place, but drag a seed that is already right off it where the views overlap in part; both schedules run
-# and the better fit wins.
-SCHEDULES = ((0.25, 0.1, 0.05, 0.025), (0.05, 0.025))
+# off into place, but can drag a seed that is already right off it where the views overlap in part (a smooth
+# object slides); every schedule runs, and of those that fit about as well as the best (``FITNESS_SLACK``) the one
+# nearest the seed wins.
+SCHEDULES = ((0.25, 0.1, 0.05, 0.025), (0.1, 0.05, 0.025), (0.05, 0.025), (0.025,))
+FITNESS_SLACK = 0.05
 
 
 @dataclass(frozen=True)
@@ -32,7 +35,8 @@ def register(source: np.ndarray, target: np.ndarray, initial: np.ndarray, voxel_
              extent: float) -> Registration:
     """Register ``source`` (M, 3) onto ``target`` (K, 3) from ``initial`` (4, 4, source frame in target frame):
     GICP on clouds thinned to ``voxel_size``, for each of the ``SCHEDULES`` matching points up to its shares of the
-    object's ``extent`` (m) apart, from far to near; the best fit (fitness, then RMSE, measured at 2 voxels) wins."""
+    object's ``extent`` (m) apart, from far to near; of the fits within ``FITNESS_SLACK`` of the best fitness
+    (measured at 2 voxels), the one that turns the source least from ``initial`` wins."""
     target_cloud, target_tree = small_gicp.preprocess_points(target, voxel_size, num_neighbors=NEIGHBOURS)
     source_cloud, _ = small_gicp.preprocess_points(source, voxel_size, num_neighbors=NEIGHBOURS)
     found = []
@@ -45,7 +49,15 @@ def register(source: np.ndarray, target: np.ndarray, initial: np.ndarray, voxel_
             transform = np.asarray(result.T_target_source)
         fitness, rmse = alignment_quality(source_cloud.points()[:, :3], target_tree, transform, 2.0 * voxel_size)
         found.append(Registration(transform, fitness, rmse))
-    return max(found, key=lambda registration: (registration.fitness, -registration.inlier_rmse))
+    best = max(registration.fitness for registration in found)
+    near = [registration for registration in found if registration.fitness >= best - FITNESS_SLACK]
+    return min(near, key=lambda registration: turn(registration.transform, initial))
+
+
+def turn(transform: np.ndarray, initial: np.ndarray) -> float:
+    """The angle (rad) between two poses' rotations (4, 4 each)."""
+    relative = transform[:3, :3].T @ initial[:3, :3]
+    return float(np.arccos(np.clip((np.trace(relative) - 1.0) / 2.0, -1.0, 1.0)))
 
 
 def alignment_quality(source: np.ndarray, target_tree: small_gicp.KdTree, transform: np.ndarray,

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import pybullet
 
@@ -44,6 +45,9 @@ BACKDROP_GAP = (0.10, 0.30)  # m from the target's bounding ball to the backdrop
 OFF_CENTRE = (0.3, 0.65)  # of the way from the image centre to its edge: where an off-centre target's centre sits
 FAIR_MARGIN = 0.15  # of that way: how much farther out than the target every distractor's centre is
 AIM_TRIES = 100
+STEREO_SD_AT_1M = 0.004  # m: an active stereo camera's depth noise at 1 m (a D435 at 848 px: 2-4 mm)
+STEREO_EDGE_JUMP = 0.03  # of the depth: a step between neighbours this large is an edge, with no reading around it
+STEREO_EDGE_PX = 2  # px of holes either side of such an edge
 LOOSE_BOX = (0.1, 0.3)  # of the box's side: how much a detector's box overshoots the object on each side
 _COLOURS = ((0.85, 0.3, 0.2, 1.0), (0.2, 0.5, 0.85, 1.0), (0.3, 0.7, 0.3, 1.0), (0.9, 0.8, 0.2, 1.0),
             (0.6, 0.3, 0.7, 1.0), (0.2, 0.75, 0.8, 1.0))
@@ -107,21 +111,22 @@ def parts_target(rng: np.random.Generator) -> ObjectSpec:
              position=(body[0] / 2 + reach - head / 2, 0.0, body[2] / 2 + head / 2 - 0.05))))
 
 
-def _backdrop(rng: np.random.Generator, table_top: float, camera_azimuth: float) -> Placement:
+def _backdrop(rng: np.random.Generator, table_top: float, camera_azimuth: float, target_radius: float) -> Placement:
     """A textured panel standing on the table 10-30 cm behind the target as seen from ``camera_azimuth``,
     facing the camera (its broad side across the view)."""
     sides = (0.04, 1.0, float(rng.uniform(0.5, 0.8)))
     texture = WALL_TEXTURES[int(rng.integers(len(WALL_TEXTURES)))]
     spec = ObjectSpec("backdrop", (Part("cube.obj", scale=sides, texture=texture),))
     radius = float(rng.uniform(0.25, 0.35))
-    distance = TARGET_RADIUS + float(rng.uniform(*BACKDROP_GAP)) + sides[0] / 2
+    distance = target_radius + float(rng.uniform(*BACKDROP_GAP)) + sides[0] / 2
     azimuth = camera_azimuth + math.pi + float(rng.uniform(-0.2, 0.2))
     return Placement(spec, (distance * math.cos(azimuth), distance * math.sin(azimuth),
                             table_top + half_height(spec, radius)), radius, math.degrees(azimuth))
 
 
 def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: float,
-                  challenge: str = "clutter", random_lighting: bool = True) -> TabletopLayout:
+                  challenge: str = "clutter", random_lighting: bool = True,
+                  target_radius: float = TARGET_RADIUS) -> TabletopLayout:
     """A seeded scene around ``target``: 2-4 distractors (one close behind the target as seen from azimuth
     ``behind_azimuth + pi``, the others 0.2-0.5 m away, none overlapping), random textures and light.
 
@@ -129,11 +134,12 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
     "touching" puts the first distractor, a box, against the target's side as seen from there; "backdrop"
     adds a panel 10-30 cm behind the target; "clutter" and "off_centre" (a matter of the camera) add nothing.
     ``random_lighting`` False lights the scene with ``TRAINING_LIGHT`` (the light is drawn either way, so the
-    rest of the layout is the same).
+    rest of the layout is the same). ``target_radius`` (m): the ball the target fits (distractors keep their sizes
+    and stand around it).
     """
     if challenge not in CHALLENGES:
         raise ValueError(f"challenge must be one of {', '.join(CHALLENGES)}, got {challenge!r}")
-    table_top = -half_height(target, TARGET_RADIUS)
+    table_top = -half_height(target, target_radius)
     placed: list[Placement] = []
     count = int(rng.integers(2, 5))
     pool = _distractor_pool(rng, count)
@@ -146,12 +152,12 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
         for _ in range(100):
             if k == 0 and challenge == "touching":  # bounding balls overlapping: the box leans on the target
                 side = 1.0 if rng.random() < 0.5 else -1.0
-                distance = 0.8 * (TARGET_RADIUS + radius)
+                distance = 0.8 * (target_radius + radius)
                 azimuth = behind_azimuth + side * (math.pi / 2 + rng.uniform(-0.4, 0.4))
             elif k == 0:
-                distance, azimuth = TARGET_RADIUS + radius + 0.02, behind_azimuth + math.pi + rng.uniform(-0.3, 0.3)
+                distance, azimuth = target_radius + radius + 0.02, behind_azimuth + math.pi + rng.uniform(-0.3, 0.3)
             else:
-                distance, azimuth = rng.uniform(0.2, 0.5), rng.uniform(0.0, 2.0 * math.pi)
+                distance, azimuth = target_radius + rng.uniform(0.1, 0.4), rng.uniform(0.0, 2.0 * math.pi)
             x, y = distance * math.cos(azimuth), distance * math.sin(azimuth)
             clear = all(math.hypot(x - p.centre[0], y - p.centre[1]) > radius + p.radius + 0.02 for p in placed)
             if clear:
@@ -159,14 +165,14 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
         z = table_top + half_height(spec, radius)
         placed.append(Placement(spec, (x, y, z), radius, float(rng.uniform(0.0, 360.0))))
     if challenge == "backdrop":
-        placed.append(_backdrop(rng, table_top, behind_azimuth))
+        placed.append(_backdrop(rng, table_top, behind_azimuth, target_radius))
     light = random_light(rng)
     if not random_lighting:
         light = TRAINING_LIGHT
     yaw = math.degrees(behind_azimuth) if challenge == "parts" else 0.0
     walls = tuple(WALL_TEXTURES[int(i)] for i in rng.integers(0, len(WALL_TEXTURES), size=4))
     return TabletopLayout(
-        target=Placement(target, (0.0, 0.0, 0.0), TARGET_RADIUS, yaw),
+        target=Placement(target, (0.0, 0.0, 0.0), target_radius, yaw),
         distractors=tuple(placed), table_top=table_top,
         table_texture=TABLE_TEXTURES[int(rng.integers(len(TABLE_TEXTURES)))], wall_textures=walls, light=light)
 
@@ -311,6 +317,20 @@ def loose_box(mask: np.ndarray, rng: np.random.Generator) -> tuple[int, int, int
     top, bottom = max(0, int(top - grow[0] * height)), min(mask.shape[0], int(bottom + grow[1] * height))
     left, right = max(0, int(left - grow[2] * width)), min(mask.shape[1], int(right + grow[3] * width))
     return left, top, right - left, bottom - top
+
+
+def stereo_depth(depth: np.ndarray, rng: np.random.Generator, sd_at_1m: float = STEREO_SD_AT_1M,
+                 edge_jump: float = STEREO_EDGE_JUMP, edge_px: int = STEREO_EDGE_PX) -> np.ndarray:
+    """A rendered depth (H, W) m as an active stereo camera (a RealSense D4xx) reads it: Gaussian noise whose
+    standard deviation grows with the square of the depth (``sd_at_1m`` m at 1 m: stereo's depth error goes as
+    z^2 / (focal x baseline)), and no reading (0) on the far side of a depth edge: within ``edge_px`` px of a
+    surface more than ``edge_jump`` of the depth nearer, where the pair's second camera cannot see past it;
+    rounded to whole millimetres as a 16UC1 image stores it."""
+    z = np.asarray(depth, dtype=np.float32)
+    noisy = z + sd_at_1m * z.astype(np.float64) ** 2 * rng.standard_normal(z.shape)
+    nearest_around = cv2.erode(z, np.ones((2 * edge_px + 1,) * 2, np.uint8))
+    shadow = z > nearest_around * (1.0 + edge_jump)
+    return np.where(shadow, 0.0, np.round(noisy * 1000.0) / 1000.0).astype(np.float32)
 
 
 def sensor_depth(depth: np.ndarray, rng: np.random.Generator, relative_sd: float) -> np.ndarray:
