@@ -2,9 +2,10 @@
 """Depth refinement measured on fresh tabletop scenes with known cameras, for objects of every size.
 
 Per object set (the six demo objects; held-out benchmark objects, ``catalogue.BENCH_HELDOUT``: never trained on,
-never ``random_urdfs`` 900-999), per size (small: a 8 cm ball's object at 25-35 cm; typical: 20 cm at 45-65 cm;
-large: 1 m at 1.3-1.6 m) and scene: four roll-free views with gravity, rendered with exact depth and with a
-RealSense-like stereo depth (noise growing with depth squared, holes at depth edges: ``tabletop.stereo_depth``).
+never ``random_urdfs`` 900-999), per size (small: an 8 cm object at 25-35 cm; typical: 20 cm at 45-65 cm; large:
+1 m at 1.3-1.6 m, standing on the floor as a chair before a mobile robot) and scene: four roll-free views with
+gravity, rendered with exact depth and with a RealSense-like stereo depth (noise growing with depth squared,
+shadows beside near surfaces: ``tabletop.stereo_depth``).
 Each view's mask is cut by depth (``depth_cut``, scored against the true mask), then for n = 2 (views 0, 1) and
 n = 4 the poses are refined (``refine_with_depth``) from four seeds:
 
@@ -62,19 +63,20 @@ from idpose_core.synthetic.tabletop import (
 from idpose_core.view_input import ViewInput
 
 OUT = result_path("depth_refinement")
-SIZES = {"small": (0.04, (0.25, 0.35)), "typical": (0.1, (0.45, 0.65)), "large": (0.5, (1.3, 1.6))}
+# name -> (radius of the object's ball in m, camera distances in m, on a table)
+SIZES = {"small": (0.04, (0.25, 0.35), True), "typical": (0.1, (0.45, 0.65), True), "large": (0.5, (1.3, 1.6), False)}
 OBJECTS = {"demo": demo_objects, "held-out": lambda: heldout_objects(*BENCH_HELDOUT)}
 VIEWS, IMAGE_SIZE, FOV = 4, 320, 60.0
 SEEDS = ("diffusion", "within 30 deg", "identity", "random")
 WORSE_DEG = 5.0
 
 
-def render_scene(spec, radius: float, distances: tuple[float, float], seed: int):
+def render_scene(spec, radius: float, distances: tuple[float, float], table: bool, seed: int):
     """Colour, exact depth and true mask of ``VIEWS`` roll-free cameras around ``spec`` fitted into ``radius`` on a
-    tabletop, and the cameras (optical-to-world, the object's centre at the origin)."""
+    tabletop (or the floor), and the cameras (optical-to-world, the object's centre at the origin)."""
     rng = np.random.default_rng(seed)
     spheres = tabletop_cameras(rng, VIEWS, distance=distances)
-    layout = random_layout(spec, rng, behind_azimuth=float(spheres[0, 1]), target_radius=radius)
+    layout = random_layout(spec, rng, behind_azimuth=float(spheres[0, 1]), target_radius=radius, table=table)
     cameras = [challenge_camera(sphere) for sphere in spheres]
     with TabletopRenderer(layout, IMAGE_SIZE, FOV, far=max(6.0, 4 * distances[1])) as renderer:
         return [renderer.render(camera) for camera in cameras], np.stack(cameras)
@@ -119,8 +121,8 @@ def true_surface(frames, truth: np.ndarray, intrinsics: np.ndarray) -> cKDTree:
 
 def measure_scene(spec, size: str, seed: int, predictor, preset: str) -> list[dict]:
     """Every (depth, n, row) record of one scene."""
-    radius, distances = SIZES[size]
-    frames, cameras = render_scene(spec, radius, distances, seed)
+    radius, distances, table = SIZES[size]
+    frames, cameras = render_scene(spec, radius, distances, table, seed)
     intrinsics = pinhole_camera_matrix(IMAGE_SIZE, IMAGE_SIZE, FOV)
     truth = np.linalg.inv(cameras[0]) @ cameras
     gravity = [camera[:3, :3].T @ [0.0, 0.0, 1.0] for camera in cameras]

@@ -6,11 +6,12 @@ stands above it, split that into connected pieces at depth jumps (an object in f
 different piece) and at concave folds between two objects that each stand on the table (a box touching
 the target where no depth jump parts them), give a piece that does not reach the plane back to the piece
 it stands out in front of and touches (a duck's head in front of its body: a part, not an object), leave
-out what rises higher than a tabletop object can (a wall), take the target's piece (the one in the region
-of interest, else the one nearest the image centre), give it back its base (the bottom centimetre, under
-the height test's threshold: over its footprint, not facing up) and let GrabCut, seeded from it, settle
-the boundary the depth leaves ragged. Tolerances grow with each reading's depth, not the image's: a far
-wall does not loosen them. Depth is in metres in the camera's optical frame; 0 or NaN means no reading.
+out what runs out of the image upwards (a wall whose top the camera does not see; an object of any size
+shows its top), take the target's piece (the one in the region of interest, else the one nearest the image
+centre), give it back its base (the bottom centimetre, under the height test's threshold: over its
+footprint, not facing up) and let GrabCut, seeded from it, settle the boundary the depth leaves ragged.
+Tolerances grow with each reading's depth, not the image's: a far wall does not loosen them. Depth is in metres
+in the camera's optical frame; 0 or NaN means no reading.
 """
 from __future__ import annotations
 
@@ -49,7 +50,10 @@ CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most o
 MIN_SHARED_EDGE = 0.05  # of a carried piece's outline: it touches what carries it along more than this (a table
 # top that touches a crate behind it at one corner is not carried by the crate)
 GAP_POINTS = 400  # of each side, for the gap between two sets of points
-MAX_OBJECT_HEIGHT = 0.6  # m above the plane: what rises higher is the room (a wall), not an object on the table
+SCENERY_TOP_SHARE = 0.9  # of a piece's top height: its readings on the image border reach this high, it runs out of
+# the image upwards (a wall, the room), not an object standing in view
+ROOM_HEIGHT = 0.3  # m above the plane: a piece this low is an object even where the image cuts its top off
+UP_BORDER_COSINE = 0.3  # a border is an upper one when the up direction's image direction points this much at it
 GRABCUT_ITERATIONS = 4
 GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
 CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
@@ -91,11 +95,13 @@ class Plane:
 
 @dataclass(frozen=True)
 class DepthCut:
-    """``mask`` (H, W) bool of the target; ``depth_mask`` before GrabCut; the support ``plane``."""
+    """``mask`` (H, W) bool of the target; ``depth_mask`` before GrabCut; the support ``plane``; ``note``: what the
+    mask is unsure of (the central piece left out as the room), else empty."""
 
     mask: np.ndarray
     depth_mask: np.ndarray
     plane: Plane
+    note: str = ""
 
 
 def backproject(depth: np.ndarray, intrinsics: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -501,15 +507,36 @@ def recover_base(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, heigh
     return np.isin(labels, kept[kept > 0])
 
 
-def drop_scenery(labels: np.ndarray, count: int, height: np.ndarray) -> np.ndarray:
-    """The labels without the pieces that rise higher than ``MAX_OBJECT_HEIGHT`` above the plane (their
-    95th-percentile height): the room, not an object on the table (a wall seen by a camera looking up past it)."""
+def upper_border(shape: tuple[int, int], plane: Plane) -> np.ndarray:
+    """The image's border (H, W) bool on the side(s) the plane's up direction points to in the image (the top rows
+    for an upright camera): where a piece that rises out of the image leaves it."""
+    up_x, up_y = plane.normal[0], plane.normal[1]  # up's image direction: the normal's x (right) and y (down)
+    length = math.hypot(up_x, up_y) or 1.0
+    border = np.zeros(shape, bool)
+    border[0] |= -up_y / length > UP_BORDER_COSINE
+    border[-1] |= up_y / length > UP_BORDER_COSINE
+    border[:, 0] |= -up_x / length > UP_BORDER_COSINE
+    border[:, -1] |= up_x / length > UP_BORDER_COSINE
+    return border
+
+
+def drop_scenery(labels: np.ndarray, count: int, height: np.ndarray, plane: Plane) -> np.ndarray:
+    """The labels without the room: the pieces higher than ``ROOM_HEIGHT`` that rise out of the image, their
+    highest readings on its upper border (``upper_border``; the 95th-percentile height of the piece's readings there
+    at least ``SCENERY_TOP_SHARE`` of the piece's own): a wall whose top the camera does not see. An object in view,
+    from a few centimetres to a metre or more, shows its top inside the image; one under ``ROOM_HEIGHT`` cut off at
+    the image's edge is never taken for the room."""
     areas = np.bincount(labels.ravel(), minlength=count)
-    tops = np.zeros(count)
+    upper = upper_border(labels.shape, plane)
+    room = np.zeros(count, bool)
     for piece in np.flatnonzero(areas >= MIN_PIECE_SHARE * labels.size):  # smaller ones are never the target
-        tops[piece] = np.percentile(height[labels == piece], 95)
-    tops[0] = 0.0
-    return np.where(tops[labels] > MAX_OBJECT_HEIGHT, 0, labels)
+        inside = labels == piece
+        leaving = inside & upper
+        if piece == 0 or not leaving.any():
+            continue
+        top = np.percentile(height[inside], 95)
+        room[piece] = top > ROOM_HEIGHT and np.percentile(height[leaving], 95) >= SCENERY_TOP_SHARE * top
+    return np.where(room[labels], 0, labels)
 
 
 def border_labels(labels: np.ndarray) -> np.ndarray:
@@ -546,6 +573,18 @@ def target_piece(labels: np.ndarray, count: int, roi: tuple[int, int, int, int] 
     offsets = np.linalg.norm((centres - [(height - 1) / 2, (width - 1) / 2]) / [height, width], axis=1)
     central = candidates[offsets <= offsets.min() + CENTRE_MARGIN]
     return labels == central[int(np.argmax(areas[central]))]
+
+
+def nearer_the_centre(dropped: np.ndarray, piece: np.ndarray) -> bool:
+    """Whether a dropped piece (``dropped`` (H, W): labels, 0 elsewhere) of at least ``MIN_PIECE_SHARE`` of the
+    image has its centroid nearer the image centre than ``piece`` (H, W) bool has."""
+    centre = (np.array(piece.shape) - 1) / 2.0
+
+    def offset(mask: np.ndarray) -> float:
+        return float(np.linalg.norm(np.argwhere(mask).mean(axis=0) - centre))
+    chosen = offset(piece)
+    return any(offset(dropped == label) < chosen for label in np.unique(dropped[dropped > 0])
+               if (dropped == label).sum() >= MIN_PIECE_SHARE * dropped.size)
 
 
 def _fill_holes(mask: np.ndarray) -> np.ndarray:
@@ -604,11 +643,15 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     labels = merge_carried_pieces(labels, count, known_height, points, valid, _tolerance(depth, SUPPORT_HEIGHT, 0.05),
                                   plane, apart)
     on_plane = valid & (np.abs(height) < _tolerance(depth, PLANE_TOLERANCE, 0.01))
-    labels = drop_scenery(labels, count, known_height)
-    piece = target_piece(labels, count, view.roi)
+    kept = drop_scenery(labels, count, known_height, plane)
+    piece = target_piece(kept, count, view.roi)
+    note = ""
+    if view.roi is None and nearer_the_centre(labels & (kept == 0), piece):
+        note = ("the piece nearest the image centre runs out of the image upwards and was left out as the room (an "
+                "object cut off at the image's top?)")
     piece = _fill_holes(recover_base(piece, points, valid, height, plane, threshold))
     mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
-    return DepthCut(mask=mask, depth_mask=piece, plane=plane)
+    return DepthCut(mask=mask, depth_mask=piece, plane=plane, note=note)
 
 
 def object_centre(view: ViewInput, mask: np.ndarray) -> np.ndarray:

@@ -153,7 +153,7 @@ def foreground_mask(view: ViewInput) -> tuple[np.ndarray, str, str]:
     """(mask (H, W) bool, method, note) from the most trusted source the view has (``MASK_METHODS``).
 
     An alpha channel counts only when it marks something transparent; depth needs ``depth`` and
-    ``intrinsics``. ``note`` says why depth, when present, was not used ("" otherwise).
+    ``intrinsics``. ``note`` says why depth, when present, was not used, or what its cut is unsure of ("" otherwise).
     """
     if view.mask is not None:
         return np.asarray(view.mask, dtype=bool), "mask", ""
@@ -163,7 +163,8 @@ def foreground_mask(view: ViewInput) -> tuple[np.ndarray, str, str]:
     note = ""
     if view.depth is not None:
         try:
-            return depth_cut(view).mask, "depth", ""
+            cut = depth_cut(view)
+            return cut.mask, "depth", cut.note
         except DepthSegmentationError as err:
             note = f"depth not used: {err}"
     mask = threshold_mask(view.rgb)

@@ -364,3 +364,26 @@ def test_a_region_of_interest_takes_the_piece_it_holds_not_a_larger_one_reaching
 
     view, truth = challenge_view("off_centre", 5, seed=9811, size=320, crowded=True)
     assert mask_iou(depth_cut(with_roi(view, truth, 9811, 5, crowded=True)).mask, truth) > 0.85
+
+
+@pytest.mark.parametrize("polar_deg, distance, kept", [(60.0, 1.5, True), (90.0, 0.65, False)])
+def test_an_object_a_metre_tall_is_kept_unless_the_image_cuts_its_top(polar_deg, distance, kept):
+    """The teddy fitted into a 1 m ball on the floor of the room: whole in view from 1.5 m, 30 deg above, it is the
+    target (no height limit takes it for the room); from 0.65 m, level, the image cuts off its top, it runs out
+    of the image upwards like a wall, and the cut says it left the central piece out."""
+    from idpose_core.synthetic.scenes import demo_objects
+    from idpose_core.synthetic.tabletop import TabletopRenderer, challenge_camera, random_layout
+
+    teddy = next(spec for spec in demo_objects() if spec.name == "teddy")
+    layout = random_layout(teddy, np.random.default_rng(2), 0.0, target_radius=0.5, table=False)
+    camera = challenge_camera(np.array([math.radians(polar_deg), 0.3, distance]))
+    with TabletopRenderer(layout, SIZE, 60.0) as renderer:
+        frame = renderer.render(camera)
+    up = camera[:3, :3].T @ [0.0, 0.0, 1.0]
+    cut = depth_cut(ViewInput(rgb=frame.rgb, depth=frame.depth, intrinsics=K, gravity_up=up))
+    overlap = (cut.mask & frame.target_mask).sum() / (cut.mask | frame.target_mask).sum()
+    if kept:
+        assert overlap > 0.9 and cut.note == ""
+    else:
+        assert frame.target_mask[0].any(), "the image cuts the teddy's top"
+        assert overlap < 0.5 and "left out as the room" in cut.note

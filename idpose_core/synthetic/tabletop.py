@@ -69,10 +69,11 @@ class TabletopLayout:
 
     target: Placement
     distractors: tuple[Placement, ...]
-    table_top: float  # z of the table top (m)
+    table_top: float  # z of the table top (m), or of the floor without a table
     table_texture: str
     wall_textures: tuple[str, str, str, str]
     light: Light
+    table: bool = True  # False: everything stands on the floor (an object too big for a table)
 
 
 def half_height(spec: ObjectSpec, radius: float) -> float:
@@ -126,7 +127,7 @@ def _backdrop(rng: np.random.Generator, table_top: float, camera_azimuth: float,
 
 def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: float,
                   challenge: str = "clutter", random_lighting: bool = True,
-                  target_radius: float = TARGET_RADIUS) -> TabletopLayout:
+                  target_radius: float = TARGET_RADIUS, table: bool = True) -> TabletopLayout:
     """A seeded scene around ``target``: 2-4 distractors (one close behind the target as seen from azimuth
     ``behind_azimuth + pi``, the others 0.2-0.5 m away, none overlapping), random textures and light.
 
@@ -135,7 +136,7 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
     adds a panel 10-30 cm behind the target; "clutter" and "off_centre" (a matter of the camera) add nothing.
     ``random_lighting`` False lights the scene with ``TRAINING_LIGHT`` (the light is drawn either way, so the
     rest of the layout is the same). ``target_radius`` (m): the ball the target fits (distractors keep their sizes
-    and stand around it).
+    and stand around it); ``table`` False stands everything on the floor (a chair before a mobile robot).
     """
     if challenge not in CHALLENGES:
         raise ValueError(f"challenge must be one of {', '.join(CHALLENGES)}, got {challenge!r}")
@@ -174,7 +175,8 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
     return TabletopLayout(
         target=Placement(target, (0.0, 0.0, 0.0), target_radius, yaw),
         distractors=tuple(placed), table_top=table_top,
-        table_texture=TABLE_TEXTURES[int(rng.integers(len(TABLE_TEXTURES)))], wall_textures=walls, light=light)
+        table_texture=TABLE_TEXTURES[int(rng.integers(len(TABLE_TEXTURES)))], wall_textures=walls, light=light,
+        table=table)
 
 
 @dataclass(frozen=True)
@@ -201,11 +203,13 @@ class TabletopRenderer(PybulletClient):
             add_object(self._client, placement.spec, placement.centre, placement.radius, placement.yaw_deg)
         width, depth, thickness = TABLE_SIZE
         top = layout.table_top
-        self._box((0.0, 0.0, top - thickness / 2), (width, depth, thickness), layout.table_texture)
-        for x in (-0.6 * width / 1.4, 0.6 * width / 1.4):
-            for y in (-0.4 * depth, 0.4 * depth):
-                self._box((x, y, top - FLOOR_DROP / 2), (0.05, 0.05, FLOOR_DROP - thickness), None, (0.3, 0.25, 0.2, 1))
-        floor = top - FLOOR_DROP
+        if layout.table:
+            self._box((0.0, 0.0, top - thickness / 2), (width, depth, thickness), layout.table_texture)
+            for x in (-0.6 * width / 1.4, 0.6 * width / 1.4):
+                for y in (-0.4 * depth, 0.4 * depth):
+                    self._box((x, y, top - FLOOR_DROP / 2), (0.05, 0.05, FLOOR_DROP - thickness), None,
+                              (0.3, 0.25, 0.2, 1))
+        floor = top - FLOOR_DROP if layout.table else top
         side = 2 * ROOM_HALF_SIDE
         self._box((0.0, 0.0, floor - 0.01), (side, side, 0.02), "checker_grid.jpg")
         for k, (x, y, sx, sy) in enumerate(((ROOM_HALF_SIDE, 0, 0.02, side), (-ROOM_HALF_SIDE, 0, 0.02, side),
