@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """The fused clouds in a picture: each view's object points in the anchor's frame, one colour per view, placed by
 the seed (the true poses turned by up to 30 deg about the object, a diffusion estimate's kind of error) and by
-the depth refinement, for a few objects of ``bench/depth_refinement.py``'s scenes (stereo depth, masks cut by
-depth, four views). Writes bench/results/depth_refinement/fused_clouds.png.
+the depth refinement, for a few objects of ``bench/depth_refinement.py``'s scenes (stereo depth, the pipeline's
+masks, four views). Writes bench/results/depth_refinement/fused_clouds.png.
 
     python bench/depth_cloud_figure.py
 """
@@ -26,7 +26,7 @@ from bench.result_files import result_path
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import refine_with_depth, view_cloud
 from idpose_core.depth_fusion.refinement import rotation_between
-from idpose_core.depth_segmentation import depth_cut
+from idpose_core.preprocessing import foreground_mask
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects
 from idpose_core.synthetic.scenes import demo_objects
 from idpose_core.synthetic.tabletop import stereo_depth
@@ -64,7 +64,7 @@ def main() -> None:
         rng = np.random.default_rng(args.seed + row)
         views = [ViewInput(rgb=frame.rgb, depth=stereo_depth(frame.depth, rng), intrinsics=intrinsics,
                            gravity_up=camera[:3, :3].T @ [0.0, 0.0, 1.0]) for frame, camera in zip(frames, cameras)]
-        masks = [depth_cut(view).mask for view in views]
+        masks = [foreground_mask(view)[0] for view in views]
         truth = np.linalg.inv(cameras[0]) @ cameras
         seed = turned_truth(truth, np.linalg.inv(cameras[0])[:3, 3], rng)
         refined = refine_with_depth(views, masks, seed, radius / 20.0)

@@ -6,7 +6,8 @@ never ``random_urdfs`` 900-999), per size (small: an 8 cm object at 25-35 cm; ty
 1 m at 1.3-1.6 m, standing on the floor as a chair before a mobile robot) and scene: four roll-free views with
 gravity, rendered with exact depth and with a RealSense-like stereo depth (noise growing with depth squared,
 shadows beside near surfaces: ``tabletop.stereo_depth``).
-Each view's mask is cut by depth (``depth_cut``, scored against the true mask), then for n = 2 (views 0, 1) and
+Each view's mask is the pipeline's (``foreground_mask``: cut by depth, with its fallbacks; scored against the true
+mask), then for n = 2 (views 0, 1) and
 n = 4 the poses are refined (``refine_with_depth``) from four seeds:
 
 - ``diffusion``: the pipeline's own estimate (``--preset``, the model of ``--model``), run once per scene and n on
@@ -20,8 +21,8 @@ and camera position error (cm) against the truth, whether it was refined, and wh
 than 5 deg worse than its seed; per estimate the fused cloud's mean distance to the true visible surface (mm; the
 exact depth of every view under the true masks) and the refinement's seconds per view.
 
-    python bench/depth_refinement.py --scenes 4              # prints the table, writes bench/results/depth_refinement/
-    python bench/depth_refinement.py --no-diffusion          # the refinement rows only, no model
+    python bench/depth_refinement.py --scenes 4     # the table, also in bench/results/depth_refinement/ (.json, .md)
+    python bench/depth_refinement.py --no-diffusion # the refinement rows only, no model
 """
 from __future__ import annotations
 
@@ -45,10 +46,10 @@ from bench.result_files import result_path
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import refine_with_depth
 from idpose_core.depth_fusion.refinement import rotation_between
-from idpose_core.depth_segmentation import DepthSegmentationError, backproject, depth_cut
+from idpose_core.depth_segmentation import backproject
 from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import PipelineSettings, estimate_view_poses
-from idpose_core.preprocessing import mask_iou
+from idpose_core.preprocessing import foreground_mask, mask_iou
 from idpose_core.solver import SolverConfig
 from idpose_core.solver.config import PRESETS
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects
@@ -141,10 +142,7 @@ def measure_scene(spec, size: str, seed: int, predictor, preset: str) -> list[di
     for depth_kind, scene_views in views.items():
         masks, ious = [], []
         for view, frame in zip(scene_views, frames):
-            try:
-                mask = depth_cut(view).mask
-            except DepthSegmentationError:
-                mask = np.zeros_like(frame.target_mask)
+            mask = foreground_mask(view)[0]
             masks.append(mask)
             ious.append(mask_iou(mask, frame.target_mask))
         base = {"object": spec.name, "size": size, "scene_seed": seed, "depth": depth_kind, "mask_iou": ious}
@@ -254,7 +252,9 @@ def main() -> None:
                                     "preset": args.preset, "diffusion": not args.no_diffusion,
                                     "minutes": (time.monotonic() - started) / 60, "rows": rows,
                                     "records": records}, indent=1) + "\n")
-    print(f"wrote {args.out} ({(time.monotonic() - started) / 60:.0f} min)")
+    args.out.with_suffix(".md").write_text(table(rows) + "\n")
+    print(f"wrote {args.out} and its table {args.out.with_suffix('.md').name} "
+          f"({(time.monotonic() - started) / 60:.0f} min)")
 
 
 if __name__ == "__main__":
