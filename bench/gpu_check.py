@@ -9,7 +9,8 @@ was built). The official way's step (``bench/step_cost.py``: re-encoding, weight
 checkpointing; float32 as its code runs) gives the per-step ratio official / ours. The step is also timed
 under the node's cancellation hooks (``checked_in_modules``: a Python check in every module call, forward
 and backward), which may cost a large share of a short GPU step. Then one two-view estimate per preset on
-the same random model in the first precision: its predictor samples and seconds.
+the same random model in the first precision: its predictor samples and seconds (``live`` with the second
+view's elevation given, as gravity gives it).
 
 ``--reduced`` runs the tiny architecture at 64 px with shortened schedules, so it finishes on a CPU
 in seconds (a smoke test of this script; its figures mean nothing). Prints a table, writes JSON.
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 import threading
@@ -51,6 +53,7 @@ OUT = result_path("gpu_check")
 # --reduced: schedules cut to a few samples per stage where the preset leaves the setting at its default
 REDUCED_SCHEDULE = dict(azimuth_candidates=2, polar_candidates_deg=(0.0,), adjust_steps=1, refine_steps_per_view=2,
                         runner_up_steps=1, start_steps=2, average_last=1, probe_batch=2)
+GRAVITY_POLAR_DEG = -20.0  # the relative elevation handed to a preset made for gravity
 
 
 def synchronized(device: torch.device) -> None:
@@ -114,17 +117,19 @@ def official(args: argparse.Namespace, images: torch.Tensor) -> dict[str, float]
 
 
 def estimates(args: argparse.Namespace, images: torch.Tensor, precision: str) -> dict[str, dict]:
-    """One two-view estimate per preset: predictor samples and seconds."""
+    """One two-view estimate per preset: predictor samples and seconds; a preset made for gravity (``live``) is
+    given the second view's relative polar angle (``GRAVITY_POLAR_DEG``), as gravity would."""
     predictor = random_model(args, precision)
     out = {}
     for preset in args.presets:
         shorter = {name: value for name, value in REDUCED_SCHEDULE.items() if name not in PRESETS[preset]}
         config = SolverConfig.preset(preset, **(shorter if args.reduced else {}))
         start = time.perf_counter()
-        result = estimate_poses(predictor, images, config)
+        known_polar = [math.radians(GRAVITY_POLAR_DEG)] if config.gravity_fallback else None
+        result = estimate_poses(predictor, images, config, known_polar=known_polar)
         synchronized(torch.device(args.device))
         out[preset] = {"forward_samples": result.forward_samples, "backward_samples": result.backward_samples,
-                       "seconds": time.perf_counter() - start}
+                       "seconds": time.perf_counter() - start, "elevation_known": known_polar is not None}
         print(f"estimate {preset} ({precision}): {out[preset]}", flush=True)
     return out
 
@@ -175,7 +180,8 @@ def main() -> None:
     print(f"official step (float32): {report['official_step_float32']['seconds']:.3f} s, "
           f"{report['official_step_float32']['peak_gb']:.2f} GB")
     for preset, row in report["estimates"].items():
-        print(f"estimate {preset} ({report['estimate_precision']}): {row['forward_samples']} samples "
+        gravity = ", elevation known" if row["elevation_known"] else ""
+        print(f"estimate {preset} ({report['estimate_precision']}{gravity}): {row['forward_samples']} samples "
               f"({row['backward_samples']} differentiated), {row['seconds']:.1f} s")
     print(f"{report['minutes']:.1f} min; wrote {args.out}")
 

@@ -202,21 +202,22 @@ def result_details(result: PipelineResult) -> dict[str, Any]:
     solved = result.solver_result
     return estimate_details(result.views, result.anchor_polar_deg, result.polar_source, result.object_distance,
                             result.distance_source, solved.forward_samples, solved.backward_samples,
-                            solved.stage_samples)
+                            solved.stage_samples, solved.note)
 
 
 def estimate_details(views: Sequence[ViewReport], anchor_polar_deg: float, polar_source: str,
                      object_distance: float, distance_source: str, forward_samples: int, backward_samples: int,
-                     stage_samples: Mapping[str, Sequence[int]]) -> dict[str, Any]:
+                     stage_samples: Mapping[str, Sequence[int]], solver_note: str) -> dict[str, Any]:
     """The one layout of an estimate's details, wherever they are read from (a ``PipelineResult``, or the node's
     action result): per view the mask method (and note), gravity's roll and polar angle, the depth distance,
     whether the mask touches the border, whether the pose is reliable and what depth refinement did; where the
     anchor's polar angle and distance came from; the predictor samples it took (evaluated, differentiated, and
-    both per solver stage)."""
+    both per solver stage); why the solver ran another schedule than asked, if it did."""
     return {"views": [asdict(view) for view in views], "anchor_polar_deg": anchor_polar_deg,
             "polar_source": polar_source, "object_distance": object_distance, "distance_source": distance_source,
             "forward_samples": forward_samples, "backward_samples": backward_samples,
-            "stage_samples": {stage: list(counts) for stage, counts in stage_samples.items()}}
+            "stage_samples": {stage: list(counts) for stage, counts in stage_samples.items()},
+            "solver_note": solver_note}
 
 
 def view_crops(images: torch.Tensor) -> np.ndarray:

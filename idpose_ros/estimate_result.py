@@ -108,7 +108,8 @@ def result_message(result: PipelineResult, headers: Sequence[Header], frame_id: 
         backward_samples=solved.backward_samples,
         stages=[SolverStage(name=name, forward_samples=forward, backward_samples=backward)
                 for name, (forward, backward) in solved.stage_samples.items()],
-        seconds=float(seconds), object_cloud=cloud, object_pose=pose, object_size=size, object_axes=axes)
+        solver_note=solved.note, seconds=float(seconds), object_cloud=cloud, object_pose=pose, object_size=size,
+        object_axes=axes)
 
 
 def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
@@ -119,7 +120,8 @@ def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
                         reliable=view.reliable, refinement=refinement_of(view)) for view in result.views]
     return estimate_details(views, result.anchor_polar_deg, result.anchor_polar_source, result.object_distance,
                             result.distance_source, result.forward_samples, result.backward_samples,
-                            {stage.name: (stage.forward_samples, stage.backward_samples) for stage in result.stages})
+                            {stage.name: (stage.forward_samples, stage.backward_samples) for stage in result.stages},
+                            result.solver_note)
 
 
 def view_set_estimate(result: EstimatePoses.Result) -> ViewSetEstimate:

@@ -35,9 +35,12 @@ def test_step_and_probe_cost_and_memory_per_precision(report):
 
 
 def test_one_estimate_per_preset_with_its_sample_counts(report):
-    assert set(report["estimates"]) == {"default", "fast", "ifusion"}
+    assert set(report["estimates"]) == {"default", "fast", "live", "ifusion"}
     for row in report["estimates"].values():
         assert 0 < row["backward_samples"] < row["forward_samples"] and row["seconds"] > 0
+    # live is timed on its own case, the elevation known, so it searches the azimuth and never falls back
+    assert [name for name, row in report["estimates"].items() if row["elevation_known"]] == ["live"]
+    assert report["estimates"]["live"]["forward_samples"] < report["estimates"]["fast"]["forward_samples"]
     # the reduced ifusion search: 4 starts x 2 directions x 2 steps differentiated, nothing else
     assert report["estimates"]["ifusion"]["backward_samples"] == 16
 

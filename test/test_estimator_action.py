@@ -18,6 +18,7 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from node_harness import TIMEOUT, ActionProbe, header, mixed_encodings
 from sensor_msgs.msg import Image
 
+from idpose_core.solver import SolverConfig
 from idpose_interfaces.action import EstimatePoses
 from msg_adapters import pose_to_matrix
 
@@ -143,6 +144,17 @@ def test_a_burst_of_50_goals_is_answered_in_full_one_running(node, object_views)
     h.wait_for(lambda: h.state() == "idle", "the idle state")
     status, again = action.run(images, preset="fast")
     assert again.error_code == Result.CANCELED or again.run_id == 2
+
+
+def test_a_live_goal_without_gravity_runs_fast_and_the_result_says_why(node, object_views):
+    _, action = node()
+    status, result = action.run(image_messages(object_views), preset="live")
+    assert status == GoalStatus.STATUS_SUCCEEDED and result.error_code == Result.SUCCEEDED
+    assert "'fast' schedule" in result.solver_note and "no view's elevation is known" in result.solver_note
+    refinement = {stage.name: stage.backward_samples for stage in result.stages}["refinement"]
+    assert refinement == SolverConfig.preset("fast").refine_steps_per_view
+    _, plain = action.run(image_messages(object_views), preset="fast")
+    assert plain.error_code == Result.SUCCEEDED and plain.solver_note == ""
 
 
 def lifecycle(h: Any) -> tuple[Any, Any]:

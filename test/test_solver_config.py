@@ -32,7 +32,8 @@ def test_fast_preset_is_cheaper_and_accepts_overrides():
         ("adjust_steps", -1), ("adjust_lr", 0.0), ("keep_top", 0), ("refine_lr", math.nan),
         ("refine_t_range", (0.3, 0.2)), ("average_last", 0), ("max_batch", 0), ("seed", -1),
         ("polar_candidates_deg", ()), ("polar_candidates_deg", (200.0,)), ("anchor_polar_deg", 180.0),
-        ("runner_up_steps", -2), ("ambiguity_margin", -0.1),
+        ("runner_up_steps", -2), ("ambiguity_margin", -0.1), ("azimuth_refinements", -1),
+        ("gravity_fallback", "turbo"), ("gravity_fallback", "live"),
     ],
 )
 def test_out_of_range_fields_are_named(field, value):
@@ -85,3 +86,16 @@ def test_recommended_settings_are_checked():
         SolverConfig().with_recommended({"probe_time": 0.5})
     with pytest.raises(ValueError, match="probe_t"):
         SolverConfig().with_recommended({"probe_t": 1.5})
+
+
+def test_live_falls_back_to_fast_keeping_what_does_not_shape_the_schedule():
+    live = SolverConfig.preset("live", seed=4, refine_lr=0.5, probe_batch=3).updated(anchor_polar_deg=70.0)
+    fallback = live.fallback()
+    fast = SolverConfig.preset("fast")
+    assert (fallback.seed, fallback.refine_lr, fallback.anchor_polar_deg) == (4, 0.5, 70.0)
+    for name in ("probe_batch", "azimuth_candidates", "adjust_steps", "refine_steps_per_view", "azimuth_refinements",
+                 "runner_up_steps"):
+        assert getattr(fallback, name) == getattr(fast, name), name
+    assert fallback.gravity_fallback is None
+    with pytest.raises(ValueError, match="no gravity_fallback"):
+        fast.fallback()

@@ -172,3 +172,48 @@ def test_bad_config_raises_before_any_model_call():
 def test_a_list_of_views_is_accepted():
     result = estimate_poses(scene(2), [torch.zeros(3, 32, 32)] * 2, CONFIG)
     assert result.rel_poses.shape == (1, 3)
+
+
+def relative_polar(predictor: CountingPredictor) -> list[float]:
+    """The relative polar angles of views 1.. from the anchor, as gravity would give them."""
+    views = predictor.oracle.views_sph.numpy()
+    return list(views[1:, 0] - views[0, 0])
+
+
+def test_live_without_gravity_runs_fast_and_says_so():
+    rates = {name: ORACLE_SOLVER_SETTINGS[name] for name in ("adjust_lr", "refine_lr")}
+    live, fast = SolverConfig.preset("live", **rates), SolverConfig.preset("fast", **rates)
+    fell_back, ran_fast = estimate_poses(scene(2), images(2), live), estimate_poses(scene(2), images(2), fast)
+    assert "'fast' schedule" in fell_back.note and "no view's elevation is known" in fell_back.note
+    assert ran_fast.note == ""
+    np.testing.assert_array_equal(fell_back.rel_poses, ran_fast.rel_poses)
+    assert fell_back.stage_samples == ran_fast.stage_samples
+
+
+def test_live_with_gravity_probes_the_azimuth_coarse_to_fine_without_adjust_steps():
+    predictor = scene(2)
+    live = SolverConfig.preset("live", refine_lr=ORACLE_SOLVER_SETTINGS["refine_lr"])
+    result = estimate_poses(predictor, images(2), live, known_polar=relative_polar(predictor))
+    probe = 2 * live.probe_batch
+    grid, narrowed = live.azimuth_candidates, 2 * live.keep_top * live.azimuth_refinements
+    forward, differentiated = result.stage_samples["exploration"]
+    assert differentiated == 0 and result.note == ""
+    assert grid * probe < forward <= (grid + narrowed) * probe
+    assert result.stage_samples["refinement"][1] <= live.refine_steps_per_view
+
+
+def test_narrowing_finds_an_azimuth_between_grid_points():
+    """With the polar angle known and no refinement, the answer can only be a probed azimuth: 4 grid azimuths
+    (90 deg apart) narrowed 3 times (by 45, 22.5, 11.25 deg) come within one last step of the truth."""
+    predictor = scene(2)
+    views = predictor.oracle.views_sph.numpy()
+    truth = float(np.degrees((views[1, 1] - views[0, 1]) % (2 * math.pi)))
+    coarse = SolverConfig(**{**ORACLE_SOLVER_SETTINGS, "probe_batch": 2}, azimuth_candidates=4, adjust_steps=0,
+                          refine_steps_per_view=0, runner_up_steps=0, keep_top=1)
+    fine = coarse.updated(azimuth_refinements=3)
+    errors = []
+    for config in (coarse, fine):
+        found = np.degrees(estimate_poses(predictor, images(2), config, known_polar=relative_polar(predictor))
+                           .rel_poses[0, 1])
+        errors.append(abs((found - truth + 180.0) % 360.0 - 180.0))
+    assert errors[1] <= 90.0 / 8 < errors[0]

@@ -95,4 +95,4 @@ def test_the_runner_up_gate_skips_the_polish_when_no_far_candidate_is_close():
     assert always.stage_samples["runner-up"][1] == 10
     assert never.stage_samples.get("runner-up", (0, 0))[1] == 0
     assert math.isclose(never.runner_up_scores[0], never.runner_up_scores[0])  # a far candidate's probe error
-    assert set(PRESETS) == {"default", "fast", "ifusion"}
+    assert set(PRESETS) == {"default", "fast", "live", "ifusion"}

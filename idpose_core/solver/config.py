@@ -44,6 +44,11 @@ class SolverConfig:
     once no pose moved more than that angle over that many steps (0 = never); ``runner_up_gate`` polishes
     the runner-ups only when some view's best far candidate probes within that share of the error
     spread of its answer (None = always).
+
+    ``azimuth_refinements`` narrows the grid coarse to fine before any adjust step: that many times, each
+    view's best ``keep_top`` candidates are probed again at half the last azimuth spacing on either side
+    (forward samples only). ``gravity_fallback`` names the preset that runs instead when no view's polar
+    angle is known (a schedule made for gravity; ``fallback``).
     """
 
     variant: str = "full"
@@ -78,6 +83,8 @@ class SolverConfig:
     start_lr_patience: int = 10
     start_t_range: tuple[float, float] = (1.0, 0.0)
     start_radius_range: float = 0.8
+    azimuth_refinements: int = 0
+    gravity_fallback: str | None = None
 
     def __init__(self, **settings: Any) -> None:
         defaults = {f.name: f.default for f in fields(self)}
@@ -104,6 +111,10 @@ class SolverConfig:
         "default": the paper's. "fast": the paper's grid probed with 2 noises, the best 4 candidates adjusted,
         3 kept, 50 refinement steps per view, the runner-up polished only when it probes close
         (``bench/README.md``, the frontier).
+        "live": for gravity (every view's elevation known): 12 azimuths probed with one noise (both
+        directions), narrowed twice coarse to fine (15 and 7.5 deg), the best 2 kept, at most 16 refinement
+        steps per view (stopping once no pose moved 0.5 deg over 6 steps; the answer the mean of the last 6),
+        the runner-up polished only when it probes close; without gravity it runs "fast" (``gravity_fallback``).
         "ifusion": iFusion's pose search (chinhsuanwu/ifusion, ``optimize_pose_loop``, ``config/main.yaml``):
         4 starts at azimuth 0, 90, 180, -90 deg, 100 Adam steps each at lr 0.1 with plateau decay (factor
         0.6, patience 10), both directions per step, the timestep annealed from 1000 to 0; each view against
@@ -138,7 +149,7 @@ class SolverConfig:
                      "grad_batch", "start_steps"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 1, name, "an integer >= 1")
         for name in ("adjust_steps", "refine_steps_per_view", "runner_up_steps", "seed", "refine_stop_steps",
-                     "start_lr_patience"):
+                     "start_lr_patience", "azimuth_refinements"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 0, name, "an integer >= 0")
         for name in ("adjust_lr", "refine_lr", "ambiguity_deg", "ambiguity_margin", "start_lr",
                      "start_radius_range"):
@@ -146,6 +157,9 @@ class SolverConfig:
             need(isinstance(value, (int, float)) and math.isfinite(value) and value > 0, name, "a finite number > 0")
         need(isinstance(self.refine_stop_deg, (int, float)) and 0.0 <= self.refine_stop_deg < math.inf,
              "refine_stop_deg", "a finite number >= 0")
+        need(self.gravity_fallback is None or (self.gravity_fallback in PRESETS
+                                               and not PRESETS[self.gravity_fallback].get("gravity_fallback")),
+             "gravity_fallback", f"None or a preset without a fallback of its own, one of {sorted(PRESETS)}")
         need(0.0 < self.start_lr_factor < 1.0, "start_lr_factor", "in (0, 1)")
         need(self.adjust_top is None or (isinstance(self.adjust_top, int) and self.adjust_top >= 1), "adjust_top",
              "None (the better half) or an integer >= 1")
@@ -166,6 +180,14 @@ class SolverConfig:
         if self.anchor_polar_deg is not None:
             need(math.isfinite(self.anchor_polar_deg) and 0.0 < self.anchor_polar_deg < 180.0,
                  "anchor_polar_deg", "in (0, 180)")
+
+    def fallback(self) -> SolverConfig:
+        """The ``gravity_fallback`` preset with this config's chosen settings that do not shape the schedule
+        (``SCHEDULE_NEUTRAL``: timesteps, rates, seed, batching, the ambiguity rule, the anchor's polar angle)."""
+        if self.gravity_fallback is None:
+            raise ValueError("this solver config names no gravity_fallback preset")
+        kept = {name: getattr(self, name) for name in self.chosen & SCHEDULE_NEUTRAL}
+        return SolverConfig.preset(self.gravity_fallback, **kept)
 
     def polar_candidates(self) -> np.ndarray:
         """Relative polar candidates (P,) radians: given, derived from the anchor's, or the default.
@@ -191,5 +213,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
     "fast": dict(probe_batch=2, adjust_top=4, keep_top=3, refine_steps_per_view=50, runner_up_steps=20,
                  runner_up_gate=0.3),
+    "live": dict(azimuth_candidates=12, probe_batch=1, adjust_steps=0, azimuth_refinements=2, keep_top=2,
+                 refine_steps_per_view=16, refine_stop_deg=0.5, refine_stop_steps=6, average_last=6,
+                 runner_up_steps=8, runner_up_gate=0.3, gravity_fallback="fast"),
     "ifusion": dict(search="starts", variant="naive", probe_batch=4, refine_steps_per_view=0, runner_up_steps=0),
 }
+# The settings a fallback keeps from the config it replaces: they tune the model or the output, not the schedule.
+SCHEDULE_NEUTRAL = frozenset({
+    "variant", "anchor_polar_deg", "polar_candidates_deg", "probe_t", "adjust_lr", "refine_lr", "refine_t_range",
+    "max_batch", "grad_batch", "seed", "ambiguity_deg", "ambiguity_margin", "known_polar", "start_lr",
+    "start_t_range", "start_radius_range"})

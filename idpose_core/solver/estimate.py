@@ -68,10 +68,11 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
     is called as samples are evaluated; setting ``cancel`` stops with ``Cancelled`` before the next
     predictor call, or inside one at its next torch module (``checked_in_modules``). ``known_polar``
     (N-1,) are relative polar angles (radians) known from gravity, NaN where unknown: those views search
-    azimuth only (``config.known_polar`` says whether refinement may move them). ``samples(evaluated,
-    differentiated)`` follows the predictor samples of the estimate as they are spent. Bad input raises
-    ``ValueError`` before the predictor is touched. Seeded by ``config.seed``: repeated runs on the
-    CPU are identical.
+    azimuth only (``config.known_polar`` says whether refinement may move them); a schedule made for
+    gravity (``config.gravity_fallback``) runs its fallback preset when no view's polar angle is known, and
+    the result's ``note`` says so. ``samples(evaluated, differentiated)`` follows the predictor samples of
+    the estimate as they are spent. Bad input raises ``ValueError`` before the predictor is touched. Seeded
+    by ``config.seed``: repeated runs on the CPU are identical.
     """
     config = config or SolverConfig()
     config.validate()
@@ -82,6 +83,11 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
         if known.shape != (len(images) - 1,) or bool(torch.isinf(known).any()):
             raise ValueError(f"known_polar must hold {len(images) - 1} finite angles or NaN, got "
                              f"{np.asarray(known_polar).tolist()}")
+    note = ""
+    if config.gravity_fallback and (known is None or not bool(torch.isfinite(known).any())):
+        note = (f"ran the {config.gravity_fallback!r} schedule: the one asked for needs gravity, and no view's "
+                "elevation is known")
+        config = config.fallback()
     seconds: dict[str, float] = {}
 
     raise_if_cancelled(cancel, "setup")
@@ -119,4 +125,5 @@ def estimate_poses(predictor: NoisePredictor, images: torch.Tensor | Sequence[to
         backward_samples=context.backward_samples,
         stage_samples={stage: tuple(counts) for stage, counts in context.stage_samples.items()},
         stage_seconds=seconds,
+        note=note,
     )

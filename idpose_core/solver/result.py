@@ -18,7 +18,8 @@ class SolverResult:
     (rules in ``idpose_core.solver.scoring``). ``forward_samples`` counts
     predictor samples evaluated, ``backward_samples`` those differentiated, ``stage_samples`` both per
     stage (the exploration's differentiated samples are its batched adjust steps, every other stage's
-    are steps of one sample); ``stage_seconds`` maps stage name -> wall time.
+    are steps of one sample); ``stage_seconds`` maps stage name -> wall time; ``note`` is empty, or says why
+    another schedule ran than the one asked for.
     """
 
     rel_poses: np.ndarray
@@ -31,3 +32,4 @@ class SolverResult:
     backward_samples: int
     stage_samples: dict[str, tuple[int, int]] = field(default_factory=dict)
     stage_seconds: dict[str, float] = field(default_factory=dict)
+    note: str = ""

@@ -345,6 +345,8 @@ class EstimatorNode(LifecycleNode):
         self._runs.finish(run, RunPhase.IDLE, message, last)
         if warning := border_warning(result):
             self.get_logger().warning(warning)
+        if solved.note:
+            self.get_logger().warning(f"run {run_id}: {solved.note}")
         self.get_logger().info(f"published {len(result.poses)} poses in frame '{run.frame_id}' "
                                f"after {outcome.seconds:.1f} s ({int(sum(last.ambiguous))} ambiguous)")
 

@@ -113,7 +113,8 @@ class NodeSettings:
         bounds=(1_000_000, 2**40), read_only=True))
     preset: str = field(default="", metadata=_spec(
         "named solver settings: setting it sets the solver parameters below to the preset's values and takes the "
-        "solver's other settings from it (ifusion: iFusion's pose search); empty = the solver parameters as set",
+        "solver's other settings from it (live: for gravity, else fast; ifusion: iFusion's pose search); empty = the "
+        "solver parameters as set",
         choices=("", *PRESETS)))
 
 
