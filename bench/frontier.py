@@ -74,6 +74,9 @@ LEVERS: dict[str, tuple[int, str, dict[str, Any]]] = {
     "live, no narrowing": (2, "live", {"azimuth_refinements": 0}),
     "live, 8 azimuths, 3 narrowings": (2, "live", {"azimuth_candidates": 8, "azimuth_refinements": 3}),
     "live, refine 32": (2, "live", {"refine_steps_per_view": 32}),
+    "live, no stop": (2, "live", {"refine_stop_steps": 0}),
+    "live, no stop, refine 32": (2, "live", {"refine_stop_steps": 0, "refine_steps_per_view": 32}),
+    "live, adjust best 2": (2, "live", {"adjust_steps": 10, "adjust_top": 2}),
 }
 ORACLE_RATES = {name: ORACLE_SOLVER_SETTINGS[name] for name in ("adjust_lr", "refine_lr")}
 WITH_GRAVITY = GroundTruthOptions(extras=ExtraTopics(gravity_topic=IMU_TOPIC))
@@ -110,8 +113,8 @@ def bag_sets(rows: dict, args: argparse.Namespace, work: Path) -> dict[str, dict
         estimates = []
         started = time.monotonic()
         for (kind, name), bag in bags.items():
-            if kind == "fresh" and SolverConfig.preset(preset).gravity_fallback:
-                continue  # without gravity it runs its fallback preset, whose own row shows that
+            if kind not in args.bag_sets or (kind == "fresh" and SolverConfig.preset(preset).gravity_fallback):
+                continue  # a set not asked for; or without gravity it runs its fallback, whose own row shows that
             evaluation = evaluate_bag(bag, estimator, WITH_GRAVITY if kind == "rolled" else None, protocol,
                                       show_progress=False)
             records[kind].extend({**record, "bag": name} for record in evaluation.records)
@@ -197,6 +200,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rows", nargs="+", default=list(ROWS), choices=[*ROWS, *LEVERS])
     parser.add_argument("--bag-rows", nargs="*", help="rows also run on the bags (default: all of --rows)")
+    parser.add_argument("--bag-sets", nargs="+", choices=("fresh", "rolled"), default=["fresh", "rolled"],
+                        help="the bag sets to run (fresh: no gravity; rolled: with gravity)")
     parser.add_argument("--pairs", type=int, default=1, help="evaluate_bag picks per bag")
     parser.add_argument("--object-set", choices=tuple(OBJECT_SETS), default="heldout",
                         help="the objects of the fresh and rolled bags")
