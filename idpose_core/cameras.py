@@ -120,6 +120,12 @@ def anchor_frame_poses(
     if not (np.isfinite(object_distance) and object_distance > 0.0):
         raise ValueError(f"object_distance must be a positive distance, got {object_distance}")
     anchor_sph = np.array([anchor_polar, 0.0, object_distance])
-    views_sph = np.concatenate([anchor_sph[None], apply_relative(anchor_sph, rel_sph, radius_scale)], axis=0)
-    world_from_cams = opengl_to_optical(spherical_to_c2w(views_sph))
+    return first_camera_frame_poses(
+        np.concatenate([anchor_sph[None], apply_relative(anchor_sph, rel_sph, radius_scale)], axis=0))
+
+
+def first_camera_frame_poses(spheres: np.ndarray) -> np.ndarray:
+    """Optical-convention poses (N, 4, 4) of look-at cameras at absolute ``spheres`` (N, 3) = (polar, azimuth,
+    radius) in the first camera's optical frame (the first pose is the identity)."""
+    world_from_cams = opengl_to_optical(spherical_to_c2w(np.asarray(spheres, dtype=np.float64)))
     return np.linalg.inv(world_from_cams[0]) @ world_from_cams

@@ -21,6 +21,7 @@ from idpose_core.depth_fusion import DepthRefinement, ObjectFrame, ViewRefinemen
 from idpose_core.depth_segmentation import DepthSegmentationError, object_distance
 from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, with_roll
+from idpose_core.next_view import NextView, ReachableSet, suggest_next_view, view_spheres
 from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
 from idpose_core.solver import Progress, SampleCount, SolverConfig, SolverResult, estimate_poses
@@ -45,13 +46,16 @@ class PipelineSettings:
     (metres, the scale of the published positions; depth overrides it) and ``image_size``, the side of
     the preprocessed views the model sees; ``depth_refinement``: refine the poses of views with depth by
     registering their object points (``idpose_core.depth_fusion``), the fused cloud thinned to
-    ``cloud_voxel_size`` (m)."""
+    ``cloud_voxel_size`` (m); ``reachable`` and ``next_view_criterion``: where the next camera may stand and how
+    it is chosen (``idpose_core.next_view``)."""
 
     solver: SolverConfig
     object_distance: float = 1.0
     image_size: int = MODEL_IMAGE_SIZE
     depth_refinement: bool = True
     cloud_voxel_size: float = 0.005
+    reachable: ReachableSet = ReachableSet()
+    next_view_criterion: str = "bridge"
 
 
 @dataclass(frozen=True)
@@ -83,7 +87,8 @@ class PipelineResult:
     "gravity" or "parameter"; ``distance_source``: "depth" or "parameter"). ``runner_up_poses`` (N, 4, 4):
     each view's runner-up (``SolverResult.runner_up_poses``) in the same frame, NaN for the anchor and for
     views without one. ``depth``: the depth refinement and the fused cloud, ``object``: the cloud's pose and box
-    (both None without depth on the anchor, or with ``depth_refinement`` off)."""
+    (both None without depth on the anchor, or with ``depth_refinement`` off). ``next_view``: the reachable camera
+    that best settles the views left ambiguous, or widens coverage (``suggest_next_view``)."""
 
     poses: np.ndarray
     runner_up_poses: np.ndarray
@@ -95,6 +100,7 @@ class PipelineResult:
     polar_source: str
     object_distance: float
     distance_source: str
+    next_view: NextView
     depth: DepthRefinement | None = None
     object: ObjectFrame | None = None
 
@@ -151,6 +157,19 @@ def runner_up_poses(solved: SolverResult, polar_deg: float, distance: float, rol
     return poses
 
 
+def next_view_for(solved: SolverResult, polar_deg: float, distance: float, anchor_roll: float,
+                  settings: PipelineSettings) -> NextView:
+    """The next camera to capture from the solver's answers and runner-ups, the anchor at ``polar_deg`` and
+    ``distance`` with roll ``anchor_roll`` (rad)."""
+    polar = math.radians(polar_deg)
+    rivals = view_spheres(solved.runner_up_poses, polar, distance)
+    rivals[0] = math.nan
+    return suggest_next_view(view_spheres(solved.rel_poses, polar, distance), rivals,
+                             np.r_[False, np.asarray(solved.ambiguous, bool)],
+                             np.r_[1.0, np.asarray(solved.confidence, np.float64)], settings.reachable,
+                             settings.next_view_criterion, anchor_roll)
+
+
 def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], settings: PipelineSettings,
                         progress: Progress | None = None, cancel: threading.Event | None = None,
                         samples: SampleCount | None = None) -> PipelineResult:
@@ -193,7 +212,7 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
                           anchor_polar_deg=polar_deg,
                           polar_source="gravity" if anchor.polar_deg is not None else "parameter",
                           object_distance=distance, distance_source="depth" if anchor.distance else "parameter",
-                          depth=depth,
+                          next_view=next_view_for(solved, polar_deg, distance, rolls[0], settings), depth=depth,
                           object=None if depth is None else object_frame(depth.cloud, views[0].gravity_up))
 
 

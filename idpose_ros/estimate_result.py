@@ -92,11 +92,16 @@ def object_messages(result: PipelineResult, frame_id: str, stamp) -> tuple[Point
     return cloud, PoseStamped(header=header, pose=matrix_to_pose(result.object.pose)), size, result.object.axes_source
 
 
+def next_view_message(result: PipelineResult, frame_id: str, stamp) -> PoseStamped:
+    """The suggested next camera in the anchor's frame at its ``stamp`` (``PipelineResult.next_view``)."""
+    return PoseStamped(header=Header(frame_id=frame_id, stamp=stamp), pose=matrix_to_pose(result.next_view.pose))
+
+
 def result_message(result: PipelineResult, headers: Sequence[Header], frame_id: str, run_id: int,
                    seconds: float) -> EstimatePoses.Result:
     """A SUCCEEDED result: the poses as ``~/poses`` publishes them (the anchor's stamp, ``frame_id``), one
-    ViewEstimate per view and the object (``object_messages``); ``headers`` are the views' image headers, the
-    anchor first."""
+    ViewEstimate per view, the object (``object_messages``) and the next view; ``headers`` are the views' image
+    headers, the anchor first."""
     solved = result.solver_result
     cloud, pose, size, axes = object_messages(result, frame_id, headers[0].stamp)
     return Result(
@@ -109,7 +114,10 @@ def result_message(result: PipelineResult, headers: Sequence[Header], frame_id: 
         stages=[SolverStage(name=name, forward_samples=forward, backward_samples=backward)
                 for name, (forward, backward) in solved.stage_samples.items()],
         solver_note=solved.note, seconds=float(seconds), object_cloud=cloud, object_pose=pose, object_size=size,
-        object_axes=axes)
+        object_axes=axes, next_view=next_view_message(result, frame_id, headers[0].stamp),
+        next_view_gain=float(result.next_view.gain),
+        next_view_settles=-1 if result.next_view.view is None else int(result.next_view.view),
+        next_view_reason=result.next_view.reason)
 
 
 def result_details(result: EstimatePoses.Result) -> dict[str, Any]:

@@ -220,7 +220,7 @@ def test_each_estimate_is_broadcast_on_tf(node, object_views, tf2_msgs):
     _, result = action.run(image_messages(object_views))
     assert result.error_code == Result.SUCCEEDED
     (message,) = h.wait_for(lambda: received, "the transforms on /tf")
-    assert [t.child_frame_id for t in message.transforms] == ["arm_view_0", "arm_view_1"]
-    for transform, pose in zip(message.transforms, result.poses.poses):
+    assert [t.child_frame_id for t in message.transforms] == ["arm_view_0", "arm_view_1", "arm_next_view"]
+    for transform, pose in zip(message.transforms, [*result.poses.poses, result.next_view.pose]):
         assert transform.header == result.poses.header, "in the anchor frame, at the anchor's stamp"
         assert (transform.transform.translation.x, transform.transform.rotation) == (pose.position.x, pose.orientation)

@@ -4,6 +4,7 @@ import torch
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 
+from idpose_core.next_view import NextView
 from idpose_core.pipeline import PipelineResult, ViewReport
 from idpose_core.preprocessing import PreprocessedViews
 from idpose_core.solver import SolverResult
@@ -63,7 +64,8 @@ def three_view_result(touching: tuple[bool, bool, bool], ambiguous: tuple[bool, 
                           np.array(ambiguous), np.ones(2), 0, 0)
     return PipelineResult(np.tile(np.eye(4), (3, 1, 1)), np.full((3, 4, 4), np.nan), solved,
                           PreprocessedViews(torch.zeros(3, 3, 4, 4), masks, ["depth"] * 3, [""] * 3, [(0, 0, 8)] * 3),
-                          masks, reports, 90.0, "parameter", 0.5, "depth")
+                          masks, reports, 90.0, "parameter", 0.5, "depth",
+                          NextView(np.array([1.0, 3.0, 0.5]), np.eye(4), 0.5, "coverage", None))
 
 
 def test_the_border_flag_and_reliability_are_diagnostic_values_and_name_the_view_in_a_warning():

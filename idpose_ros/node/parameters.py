@@ -17,6 +17,7 @@ from rclpy.parameter import Parameter
 from idpose_core.devices import DEVICE_CHOICES
 from idpose_core.gravity import IMU_WINDOW_S, rotation_from_extrinsic
 from idpose_core.model_loading import PRECISIONS
+from idpose_core.next_view import CRITERIA, ReachableSet
 from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, MODEL_IMAGE_SIZE, PipelineSettings
 from idpose_core.solver import SolverConfig
 from idpose_core.solver.config import KNOWN_POLAR_MODES, PRESETS, VARIANTS
@@ -111,6 +112,20 @@ class NodeSettings:
     record_max_bytes: int = field(default=2_000_000_000, metadata=_spec(
         "size at which the recording rotates to a new file (which starts with the buffered views)",
         bounds=(1_000_000, 2**40), read_only=True))
+    next_view_polar_deg: list[float] = field(default_factory=lambda: [30.0, 100.0], metadata=_spec(
+        "polar angles (deg from up, low high) the next suggested camera may take: what the arm reaches"))
+    next_view_azimuth_deg: list[float] = field(default_factory=lambda: [-180.0, 180.0], metadata=_spec(
+        "azimuths (deg from the anchor camera's, counter-clockwise seen from above, low high) the next suggested "
+        "camera may take"))
+    next_view_distance: list[float] = field(default_factory=lambda: [0.1, 3.0], metadata=_spec(
+        "distances (m, low high) the next camera may stand from the object; it stands at the anchor's, clipped "
+        "into them"))
+    next_view_step_deg: float = field(default=10.0, metadata=_spec(
+        "grid step (deg) of the candidate cameras the next view is chosen from", bounds=(1.0, 90.0)))
+    next_view_criterion: str = field(default="bridge", metadata=_spec(
+        "how the next view is chosen when a view is ambiguous: bridge (a camera that links the trusted views to "
+        "the ambiguous one under one hypothesis only) or contrast (a camera much nearer one hypothesis); with "
+        "nothing ambiguous, the camera farthest from every view", choices=tuple(CRITERIA)))
     preset: str = field(default="", metadata=_spec(
         "named solver settings: setting it sets the solver parameters below to the preset's values and takes the "
         "solver's other settings from it (live: for gravity, else fast; ifusion: iFusion's pose search); empty = the "
@@ -180,6 +195,10 @@ def problem(values: dict[str, Any]) -> str | None:
         return (f"views_per_estimate ({values['views_per_estimate']}) cannot exceed max_views "
                 f"({values['max_views']})")
     try:
+        reachable_set(values)
+    except (ValueError, TypeError) as exc:
+        return f"next_view_*: {exc}"
+    try:
         solver_config(values).validate()
     except ValueError as exc:
         return f"invalid solver parameters: {exc}"
@@ -200,10 +219,24 @@ def solver_config(values: dict[str, Any]) -> SolverConfig:
     return SolverConfig(anchor_polar_deg=values["anchor_polar_deg"], **exposed)
 
 
+def reachable_set(values: dict[str, Any]) -> ReachableSet:
+    """Where the next camera may stand, from the ``next_view_*`` parameters. Raises ValueError naming the range at
+    fault (a range is two numbers, low then high)."""
+    ranges = {}
+    for name in ("polar_deg", "azimuth_deg", "distance"):
+        bounds = values[f"next_view_{name}"]
+        if len(bounds) != 2:
+            raise ValueError(f"next_view_{name} must be two numbers (low high), got {list(bounds)}")
+        ranges[name] = (float(bounds[0]), float(bounds[1]))
+    return ReachableSet(**ranges, step_deg=float(values["next_view_step_deg"]))
+
+
 def pipeline_settings(values: dict[str, Any]) -> PipelineSettings:
-    """What one estimate runs on, from the node's parameter values: solver, object distance, image size."""
+    """What one estimate runs on, from the node's parameter values: solver, object distance, image size, depth
+    refinement and where the next view may stand."""
     return PipelineSettings(solver_config(values), values["object_distance"], values["image_size"],
-                            values["depth_refinement"], values["cloud_voxel_size"])
+                            values["depth_refinement"], values["cloud_voxel_size"], reachable_set(values),
+                            values["next_view_criterion"])
 
 
 def node_settings(values: dict[str, Any]) -> NodeSettings:

@@ -1,5 +1,5 @@
 """Where an estimate's result goes: ``~/poses``, ``~/markers``, ``~/views``, ``~/object_cloud``, ``~/object_pose``
-(latched) and, when on, TF."""
+(latched), ``~/next_view`` (latched) and, when on, TF."""
 from __future__ import annotations
 
 from geometry_msgs.msg import PoseArray, PoseStamped
@@ -27,13 +27,14 @@ class ResultPublisher:
         self._views = node.create_publisher(Image, "~/views", RESULT_QOS)
         self._cloud = node.create_publisher(PointCloud2, "~/object_cloud", RESULT_QOS)
         self._object_pose = node.create_publisher(PoseStamped, "~/object_pose", RESULT_QOS)
+        self._next_view = node.create_publisher(PoseStamped, "~/next_view", RESULT_QOS)
         self._tf = PoseBroadcaster(node, node.get_logger().warning) if publish_tf else None
 
     def publish(self, result: PipelineResult, message: EstimatePoses.Result, tf_prefix: str) -> None:
         """Poses (the result's own PoseArray), markers, the views the model saw, the object's cloud and pose (the
         result's own, only when the estimate has a cloud: an estimate without depth leaves the last ones) and TF;
         the markers are sized by the distance the poses use (measured from depth when the anchor had it) and add
-        the object's box when there is one."""
+        the object's box when there is one; the next view (the result's own) and its TF frame."""
         poses = message.poses
         self._poses.publish(poses)
         markers = camera_markers(result.poses, poses.header.frame_id, poses.header.stamp,
@@ -47,5 +48,6 @@ class ResultPublisher:
         mosaic = array_to_image(views_mosaic(result.preprocessed.images), "rgb8")
         mosaic.header = poses.header
         self._views.publish(mosaic)
+        self._next_view.publish(message.next_view)
         if self._tf is not None:
-            self._tf.broadcast(poses, tf_prefix)
+            self._tf.broadcast(poses, tf_prefix, message.next_view)

@@ -1,4 +1,5 @@
-"""The estimated camera poses on TF: ``<anchor frame> -> <tf_prefix>view_<k>`` for every view of an estimate.
+"""The estimated camera poses on TF: ``<anchor frame> -> <tf_prefix>view_<k>`` for every view of an estimate, and
+``<anchor frame> -> <tf_prefix>next_view`` for the camera it suggests next.
 
 tf2_ros's broadcaster where it is installed (a ROS workspace); else a ``tf2_msgs/TFMessage`` publisher on
 ``/tf`` with the same QoS (what that broadcaster is), where tf2_msgs alone is installed; else nothing, said
@@ -10,7 +11,7 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
-from geometry_msgs.msg import PoseArray, TransformStamped
+from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
@@ -23,6 +24,11 @@ TF_QOS = QoSProfile(depth=100, durability=DurabilityPolicy.VOLATILE)  # tf2_ros.
 def view_frame(prefix: str, index: int) -> str:
     """The child frame of view ``index`` (0 = the anchor)."""
     return f"{prefix}view_{index}"
+
+
+def next_view_frame(prefix: str) -> str:
+    """The child frame of the suggested next camera."""
+    return f"{prefix}next_view"
 
 
 def _sender(node: Node) -> tuple[Callable[[list[TransformStamped]], None] | None, str]:
@@ -52,7 +58,10 @@ class PoseBroadcaster:
     def enabled(self) -> bool:
         return self._send is not None
 
-    def broadcast(self, poses: PoseArray, prefix: str) -> None:
-        """``poses.header.frame_id -> prefix + view_<k>``, stamped with the poses' (the anchor's) stamp."""
+    def broadcast(self, poses: PoseArray, prefix: str, next_view: PoseStamped) -> None:
+        """``poses.header.frame_id -> prefix + view_<k>`` and ``-> prefix + next_view`` (``next_view`` is in the same
+        frame), stamped with the poses' (the anchor's) stamp."""
         if self._send is not None:
-            self._send(pose_array_to_transforms(poses, [view_frame(prefix, k) for k in range(len(poses.poses))]))
+            frames = [view_frame(prefix, k) for k in range(len(poses.poses))] + [next_view_frame(prefix)]
+            every = PoseArray(header=poses.header, poses=[*poses.poses, next_view.pose])
+            self._send(pose_array_to_transforms(every, frames))
