@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 NAMESPACE = "/console"
 NODE = f"{NAMESPACE}/idpose_estimator"
 EXAMPLE_CLIENT = ROOT / "examples" / "estimate_poses_client.py"
+ACTIVE_CAPTURE = ROOT / "examples" / "active_capture.py"
 SHUTDOWN_LIMIT = 2.0  # seconds: Ctrl-C during an estimate must end the node within this
 # seconds from Ctrl-C until the running estimate has stopped. Measured on a 2-core CPU with a training job on
 # both cores beside this test: 0.00-0.10 s over 6 runs (a cancel lands inside one model module's forward).
@@ -194,5 +195,27 @@ def test_the_example_client_captures_views_and_reads_the_action_result(workspace
         assert poses[0] == ("view 0: position (0.000, 0.000, 0.000) m, quaternion (0.000, 0.000, 0.000, 1.000), "
                             "confidence 1.00")
         assert [line.split(":")[0] for line in poses[1:]] == ["view 1", "view 2"]
+    finally:
+        stop(process, log)
+
+
+def test_the_active_capture_example_follows_the_next_view(workspace, tiny_model_dir, tmp_path):
+    """examples/active_capture.py against the installed node: each view goes in with its camera pose (gravity),
+    each estimate names the next view, and the arm's last view came from a suggestion."""
+    log = tmp_path / "estimator.log"
+    process = start_estimator(workspace, "/active", {
+        **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request", "object_distance": 2.0}, log)
+    try:
+        command = f"{sys.executable} {ACTIVE_CAPTURE} --views 3 --ros-args -r __ns:=/active"
+        result = subprocess.run(in_workspace(workspace, command), capture_output=True, text=True, timeout=180)
+        assert result.returncode == 0, result.stdout + result.stderr + log.read_text()
+        lines = result.stdout.splitlines()
+        assert [line for line in lines if line.startswith("captured")] == [
+            f"captured view {k} (Image rgba8, with gravity)" for k in (1, 2, 3)], result.stdout
+        runs = [line for line in lines if line.startswith("run ")]
+        assert [run.split(":")[0] for run in runs] == ["run 1", "run 2"]
+        assert all(re.search(r"next view: (ambiguous view \d|coverage).* \(gain [\d.]+\)$", run) for run in runs)
+        errors = [line for line in lines if line.startswith("view ")]
+        assert errors[0].startswith("view 0: rotation error 0.0 deg") and len(errors) == 3
     finally:
         stop(process, log)
