@@ -57,6 +57,14 @@ def random_pose_errors(start: CaptureStart, cameras: list[np.ndarray], rng: np.r
     return np.array(errors)
 
 
+def true_cameras_deg(start: CaptureStart, steps: list[LoopStep]) -> list[list[float]]:
+    """(polar, azimuth) in degrees of every camera of a loop, the anchor first, in the estimate's world (the
+    anchor at azimuth 0)."""
+    cameras = [start.anchor, start.second, *[step.next_camera for step in steps[:-1]]]
+    return [[round(math.degrees(c[0]), 1), round((math.degrees(c[1] - start.anchor[1]) + 180.0) % 360.0 - 180.0, 1)]
+            for c in cameras]
+
+
 def share(errors: np.ndarray, threshold: float) -> float:
     return float(np.mean(errors <= threshold))
 
@@ -143,8 +151,12 @@ def main() -> None:
         "reachable": {"polar_deg": reachable.polar_deg, "azimuth_deg": reachable.azimuth_deg,
                       "step_deg": reachable.step_deg},
         "minutes": (time.time() - begun) / 60.0, "rows": rows,
+        "truth_deg": {policy: [true_cameras_deg(start, steps) for start, steps in zip(starts, per_start)]
+                      for policy, per_start in loops.items()},
         "loops": {policy: [[{"views": s.views, "errors_deg": s.rotation_errors_deg.round(2).tolist(),
                              "ambiguous": s.ambiguous.tolist(),
+                             "spheres_deg": np.degrees(s.spheres[:, :2]).round(1).tolist(),
+                             "rivals_deg": np.degrees(s.rivals[:, :2]).round(1).tolist(),
                              "next_camera_deg": None if s.next_camera is None
                              else np.degrees(s.next_camera[:2]).round(1).tolist()} for s in steps]
                            for steps in per_start] for policy, per_start in loops.items()}}, indent=1) + "\n")

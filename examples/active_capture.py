@@ -7,8 +7,9 @@ at the origin of the arm's world, +z up; the camera starts at two random cameras
 arm publishes its camera's pose (``camera_pose``: the optical frame in the arm's world, which gives gravity) and
 the render (``image``, the mask as alpha), and keeps it with ``~/capture``. From two views on it sends a goal on
 the buffered views and turns the result's ``next_view`` (in the anchor camera's frame) into the arm's world
-through the anchor camera's pose, where the arm goes next. It prints each suggestion, and at the end each view's
-rotation error against the truth the arm knows.
+through the anchor camera's pose, where the arm goes next, until no view is ambiguous or the view budget is spent
+(``--keep-going``: spend it all). It prints each suggestion, and at the end each view's rotation error against
+the truth the arm knows.
 """
 import argparse
 import math
@@ -82,7 +83,8 @@ def estimate(node: Node, action: ActionClient) -> EstimatePoses.Result:
 def main() -> int:
     rclpy.init(args=sys.argv)
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--views", type=int, default=4, help="views at the end (at least 3)")
+    parser.add_argument("--views", type=int, default=4, help="the view budget")
+    parser.add_argument("--keep-going", action="store_true", help="spend the budget even when nothing is ambiguous")
     parser.add_argument("--object", type=int, default=0, help="which held-out benchmark object")
     parser.add_argument("--seed", type=int, default=0, help="the two starting cameras")
     args = parser.parse_args(remove_ros_args(sys.argv)[1:])
@@ -104,7 +106,7 @@ def main() -> int:
             ambiguous = [k for k, view in enumerate(result.views) if view.ambiguous]
             print(f"run {result.run_id}: {len(result.views)} views, ambiguous {ambiguous or 'none'}; next view: "
                   f"{result.next_view_reason} (gain {result.next_view_gain:.2f})")
-            if len(cameras) >= args.views:
+            if len(cameras) >= args.views or not (ambiguous or args.keep_going):
                 break
             cameras.append(cameras[0] @ pose_to_matrix(result.next_view.pose))  # anchor frame -> the arm's world
             print(arm.take(cameras[-1]))

@@ -157,14 +157,20 @@ def runner_up_poses(solved: SolverResult, polar_deg: float, distance: float, rol
     return poses
 
 
+def hypothesis_spheres(solved: SolverResult, polar_deg: float, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The spheres (N, 3) of every view's answer and of its runner-up (NaN rows where none, always the anchor's),
+    the anchor at ``polar_deg`` (degrees), azimuth 0 and ``distance``."""
+    polar = math.radians(polar_deg)
+    rivals = view_spheres(solved.runner_up_poses, polar, distance)
+    rivals[0] = math.nan
+    return view_spheres(solved.rel_poses, polar, distance), rivals
+
+
 def next_view_for(solved: SolverResult, polar_deg: float, distance: float, anchor_roll: float,
                   settings: PipelineSettings) -> NextView:
     """The next camera to capture from the solver's answers and runner-ups, the anchor at ``polar_deg`` and
     ``distance`` with roll ``anchor_roll`` (rad)."""
-    polar = math.radians(polar_deg)
-    rivals = view_spheres(solved.runner_up_poses, polar, distance)
-    rivals[0] = math.nan
-    return suggest_next_view(view_spheres(solved.rel_poses, polar, distance), rivals,
+    return suggest_next_view(*hypothesis_spheres(solved, polar_deg, distance),
                              np.r_[False, np.asarray(solved.ambiguous, bool)],
                              np.r_[1.0, np.asarray(solved.confidence, np.float64)], settings.reachable,
                              settings.next_view_criterion, anchor_roll)

@@ -14,6 +14,7 @@ from idpose_core.cameras import first_camera_frame_poses
 from idpose_core.evaluation.active_capture import (
     MIN_START_SEPARATION_DEG,
     POLICIES,
+    largest_gap_camera,
     random_starts,
     rendered_view,
     run_loop,
@@ -78,3 +79,9 @@ def test_an_unknown_policy_is_named(predictor):
     (start,) = random_starts(demo_objects()[:1], [TRAINING_LIGHT], 1, REACHABLE, 2.0, np.random.default_rng(1))
     with pytest.raises(ValueError, match="unknown capture policy 'closest'"):
         run_loop(predictor, start, "closest", SETTINGS, 3, 32, np.random.default_rng(2))
+
+
+def test_the_largest_gap_is_split_at_the_anchor_s_polar_angle():
+    spheres = np.array([[math.radians(60.0), 0.0, 2.0], [math.radians(80.0), math.radians(100.0), 2.0]])
+    camera = largest_gap_camera(spheres, ReachableSet())
+    assert np.degrees(camera[:2]) == pytest.approx([60.0, -130.0])

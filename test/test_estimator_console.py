@@ -206,7 +206,7 @@ def test_the_active_capture_example_follows_the_next_view(workspace, tiny_model_
     process = start_estimator(workspace, "/active", {
         **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request", "object_distance": 2.0}, log)
     try:
-        command = f"{sys.executable} {ACTIVE_CAPTURE} --views 3 --ros-args -r __ns:=/active"
+        command = f"{sys.executable} {ACTIVE_CAPTURE} --views 3 --keep-going --ros-args -r __ns:=/active"
         result = subprocess.run(in_workspace(workspace, command), capture_output=True, text=True, timeout=180)
         assert result.returncode == 0, result.stdout + result.stderr + log.read_text()
         lines = result.stdout.splitlines()

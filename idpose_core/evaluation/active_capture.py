@@ -16,15 +16,23 @@ import numpy as np
 from idpose_core.cameras import first_camera_frame_poses, opengl_to_optical, spherical_to_c2w
 from idpose_core.gravity import up_from_orientation
 from idpose_core.metrics import rotation_angle_deg
-from idpose_core.next_view import ReachableSet, suggest_next_view, view_spheres
+from idpose_core.next_view import ReachableSet, suggest_next_view
+from idpose_core.next_view.suggestion import angles_between
 from idpose_core.noise_predictor import NoisePredictor
-from idpose_core.pipeline import PipelineResult, PipelineSettings, estimate_view_poses, next_view_for
+from idpose_core.pipeline import (
+    PipelineResult,
+    PipelineSettings,
+    estimate_view_poses,
+    hypothesis_spheres,
+    next_view_for,
+)
 from idpose_core.synthetic.scenes import Light, ObjectSpec, SceneRenderer
 from idpose_core.view_input import ViewInput
 
-POLICIES = ("suggested", "contrast", "coverage", "random")
+POLICIES = ("suggested", "contrast", "coverage", "largest_gap", "random")
 """How the next camera is picked: the suggestion with its default criterion (bridge) or with ``contrast``; the
-reachable camera farthest from every estimated view, ignoring ambiguity (``coverage``); a reachable camera at
+reachable camera farthest from every estimated view, ignoring ambiguity (``coverage``); the middle of the widest
+azimuth gap between the estimated views at the anchor's polar angle (``largest_gap``); a reachable camera at
 random (``random``)."""
 MIN_START_SEPARATION_DEG = 30.0  # the second view of a start is at least this far from the anchor
 
@@ -43,13 +51,16 @@ class CaptureStart:
 @dataclass(frozen=True)
 class LoopStep:
     """One estimate of a loop on ``views`` views: the rotation error (degrees) and the ambiguity flag of each
-    non-anchor view (``views - 1``,), the predictor samples it took, and the true sphere of the camera the policy
-    picked next (None after the last estimate)."""
+    non-anchor view (``views - 1``,), the predictor samples it took, the estimated spheres of every view and of
+    its runner-up (``views``, 3; the estimate's world, NaN rows where none), and the true sphere of the camera the
+    policy picked next (None after the last estimate)."""
 
     views: int
     rotation_errors_deg: np.ndarray
     ambiguous: np.ndarray
     forward_samples: int
+    spheres: np.ndarray
+    rivals: np.ndarray
     next_camera: np.ndarray | None
 
 
@@ -91,20 +102,34 @@ def next_camera(policy: str, result: PipelineResult, settings: PipelineSettings,
                 ) -> np.ndarray:
     """The sphere (estimate's world: the anchor at azimuth 0) of the camera ``policy`` picks after ``result``.
     Raises ValueError for an unknown policy."""
-    solved, polar, distance = result.solver_result, result.anchor_polar_deg, result.object_distance
+    solved, distance = result.solver_result, result.object_distance
+    spheres, _ = hypothesis_spheres(solved, result.anchor_polar_deg, distance)
     if policy == "suggested":
         return result.next_view.sphere
     if policy == "contrast":
-        return next_view_for(solved, polar, distance, 0.0, replace(settings, next_view_criterion="contrast")).sphere
+        contrast = replace(settings, next_view_criterion="contrast")
+        return next_view_for(solved, result.anchor_polar_deg, distance, 0.0, contrast).sphere
     if policy == "coverage":
-        spheres = view_spheres(solved.rel_poses, math.radians(polar), distance)
         none = np.zeros(len(spheres), bool)
         return suggest_next_view(spheres, np.full_like(spheres, math.nan), none, np.ones(len(spheres)),
                                  settings.reachable).sphere
+    if policy == "largest_gap":
+        return largest_gap_camera(spheres, settings.reachable)
     if policy == "random":
         candidates = settings.reachable.candidates(distance)
         return candidates[rng.integers(len(candidates))]
     raise ValueError(f"unknown capture policy {policy!r}; choose one of {', '.join(POLICIES)}")
+
+
+def largest_gap_camera(spheres: np.ndarray, reachable: ReachableSet) -> np.ndarray:
+    """The reachable camera nearest the middle of the widest azimuth gap between ``spheres`` (N, 3), at the first
+    (the anchor's) polar angle."""
+    azimuths = np.sort(np.mod(spheres[:, 1], 2.0 * math.pi))
+    gaps = np.diff(np.r_[azimuths, azimuths[0] + 2.0 * math.pi])
+    widest = int(np.argmax(gaps))
+    target = np.array([[spheres[0, 0], azimuths[widest] + gaps[widest] / 2.0, spheres[0, 2]]])
+    candidates = reachable.candidates(float(spheres[0, 2]))
+    return candidates[int(np.argmin(angles_between(candidates, target)[:, 0]))]
 
 
 def run_loop(predictor: NoisePredictor, start: CaptureStart, policy: str, settings: PipelineSettings,
@@ -125,7 +150,9 @@ def run_loop(predictor: NoisePredictor, start: CaptureStart, policy: str, settin
             if not done:
                 chosen = next_camera(policy, result, settings, rng).copy()
                 chosen[1] += start.anchor[1]  # the estimate's world -> the true one (exact gravity: same polar)
-            steps.append(LoopStep(len(views), errors, ambiguous, int(result.solver_result.forward_samples), chosen))
+            steps.append(LoopStep(len(views), errors, ambiguous, int(result.solver_result.forward_samples),
+                                  *hypothesis_spheres(result.solver_result, result.anchor_polar_deg,
+                                                      result.object_distance), chosen))
             if done:
                 return steps
             spheres.append(chosen)
