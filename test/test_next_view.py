@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from idpose_core.gravity import rz
 from idpose_core.next_view import ReachableSet, suggest_next_view, view_spheres
 from idpose_core.next_view.suggestion import angles_between
 
@@ -113,3 +114,14 @@ def test_bad_arguments_name_the_problem():
         suggest_next_view(spheres, rivals, ambiguous, confidence, ReachableSet(), criterion="closest")
     with pytest.raises(ValueError, match="same N views"):
         suggest_next_view(spheres, rivals[:1], ambiguous, confidence, ReachableSet())
+
+
+def test_a_rolled_anchor_gets_the_same_camera_in_its_own_frame():
+    """The anchor camera rolled by 0.4 rad about its axis: the suggested camera is the same place, still level."""
+    layout = two_views(60.0, 240.0)
+    upright = suggest_next_view(*layout, ReachableSet()).pose
+    rolled = suggest_next_view(*layout, ReachableSet(), anchor_roll=0.4).pose
+    turn = rz(0.4)
+    up = turn.T @ np.array([0.0, -math.sin(POLAR), -math.cos(POLAR)])  # world up in the rolled anchor's frame
+    assert np.allclose(rolled[:3, 3], turn.T @ upright[:3, 3])
+    assert abs(rolled[:3, 0] @ up) < 1e-9 and rolled[:3, 1] @ up < 0.0
