@@ -171,6 +171,22 @@ def test_invalid_start_up_parameters_are_fatal_under_the_node_s_full_name(worksp
     assert "[some.robot.idpose_estimator]: invalid parameters:" in fatal and "variant must be one of" in fatal
 
 
+def example_output(workspace: Path, tmp_path: Path, namespace: str, parameters: dict, example: str,
+                   timeout: float) -> list[str]:
+    """The stdout lines of an example run (``example``: its path and arguments) in the sourced workspace against
+    the installed node, started in ``namespace`` with the fast solver, on-request capture and ``parameters``;
+    fails with the example's and the node's output when the example does."""
+    log = tmp_path / "estimator.log"
+    process = start_estimator(workspace, namespace, {**FAST, "capture_mode": "on_request", **parameters}, log)
+    try:
+        command = f"{sys.executable} {example} --ros-args -r __ns:={namespace}"
+        result = subprocess.run(in_workspace(workspace, command), capture_output=True, text=True, timeout=timeout)
+        assert result.returncode == 0, result.stdout + result.stderr + log.read_text()
+        return result.stdout.splitlines()
+    finally:
+        stop(process, log)
+
+
 def test_the_example_client_captures_views_and_reads_the_action_result(workspace, tiny_model_dir, object_views,
                                                                      tmp_path):
     """examples/estimate_poses_client.py, run as docs/node.md says, against the installed node."""
@@ -178,44 +194,28 @@ def test_the_example_client_captures_views_and_reads_the_action_result(workspace
     views.mkdir()
     for index, (rgb, alpha) in enumerate(object_views[:3]):
         cv2.imwrite(str(views / f"{index:02d}.png"), np.dstack([cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), alpha]))
-    log = tmp_path / "estimator.log"
-    process = start_estimator(workspace, "/walkthrough", {
-        **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request"}, log)
-    try:
-        command = f"{sys.executable} {EXAMPLE_CLIENT} {views} --ros-args -r __ns:=/walkthrough"
-        result = subprocess.run(in_workspace(workspace, command), capture_output=True, text=True, timeout=120)
-        assert result.returncode == 0, result.stdout + result.stderr + log.read_text()
-        lines = result.stdout.splitlines()
-        assert lines[:3] == [f"0{k}.png -> captured view {k + 1} (Image bgra8)" for k in range(3)]
-        feedback = [line for line in lines if line.startswith("feedback: ")]
-        assert feedback and all(re.fullmatch(r"feedback: [a-z-]+ \d+%, \d+ samples, [\d.]+ s", f) for f in feedback)
-        (summary,) = [line for line in lines if line.startswith("run ")]
-        assert re.fullmatch(r"run 1: 3 poses in frame 'camera_optical' after [\d.]+ s", summary)
-        poses = [line for line in lines if line.startswith("view ")]
-        assert poses[0] == ("view 0: position (0.000, 0.000, 0.000) m, quaternion (0.000, 0.000, 0.000, 1.000), "
-                            "confidence 1.00")
-        assert [line.split(":")[0] for line in poses[1:]] == ["view 1", "view 2"]
-    finally:
-        stop(process, log)
+    lines = example_output(workspace, tmp_path, "/walkthrough", {"model_path": tiny_model_dir},
+                           f"{EXAMPLE_CLIENT} {views}", timeout=120)
+    assert lines[:3] == [f"0{k}.png -> captured view {k + 1} (Image bgra8)" for k in range(3)]
+    feedback = [line for line in lines if line.startswith("feedback: ")]
+    assert feedback and all(re.fullmatch(r"feedback: [a-z-]+ \d+%, \d+ samples, [\d.]+ s", f) for f in feedback)
+    (summary,) = [line for line in lines if line.startswith("run ")]
+    assert re.fullmatch(r"run 1: 3 poses in frame 'camera_optical' after [\d.]+ s", summary)
+    poses = [line for line in lines if line.startswith("view ")]
+    assert poses[0] == ("view 0: position (0.000, 0.000, 0.000) m, quaternion (0.000, 0.000, 0.000, 1.000), "
+                        "confidence 1.00")
+    assert [line.split(":")[0] for line in poses[1:]] == ["view 1", "view 2"]
 
 
 def test_the_active_capture_example_follows_the_next_view(workspace, tiny_model_dir, tmp_path):
     """examples/active_capture.py against the installed node: each view goes in with its camera pose (gravity),
     each estimate names the next view, and the arm's last view came from a suggestion."""
-    log = tmp_path / "estimator.log"
-    process = start_estimator(workspace, "/active", {
-        **FAST, "model_path": tiny_model_dir, "capture_mode": "on_request", "object_distance": 2.0}, log)
-    try:
-        command = f"{sys.executable} {ACTIVE_CAPTURE} --views 3 --keep-going --ros-args -r __ns:=/active"
-        result = subprocess.run(in_workspace(workspace, command), capture_output=True, text=True, timeout=180)
-        assert result.returncode == 0, result.stdout + result.stderr + log.read_text()
-        lines = result.stdout.splitlines()
-        assert [line for line in lines if line.startswith("captured")] == [
-            f"captured view {k} (Image rgba8, with gravity)" for k in (1, 2, 3)], result.stdout
-        runs = [line for line in lines if line.startswith("run ")]
-        assert [run.split(":")[0] for run in runs] == ["run 1", "run 2"]
-        assert all(re.search(r"next view: (ambiguous view \d|coverage).* \(gain [\d.]+\)$", run) for run in runs)
-        errors = [line for line in lines if line.startswith("view ")]
-        assert errors[0].startswith("view 0: rotation error 0.0 deg") and len(errors) == 3
-    finally:
-        stop(process, log)
+    lines = example_output(workspace, tmp_path, "/active", {"model_path": tiny_model_dir, "object_distance": 2.0},
+                           f"{ACTIVE_CAPTURE} --views 3 --keep-going", timeout=180)
+    assert [line for line in lines if line.startswith("captured")] == [
+        f"captured view {k} (Image rgba8, with gravity)" for k in (1, 2, 3)], lines
+    runs = [line for line in lines if line.startswith("run ")]
+    assert [run.split(":")[0] for run in runs] == ["run 1", "run 2"]
+    assert all(re.search(r"next view: (ambiguous view \d|coverage).* \(gain [\d.]+\)$", run) for run in runs)
+    errors = [line for line in lines if line.startswith("view ")]
+    assert errors[0].startswith("view 0: rotation error 0.0 deg") and len(errors) == 3
