@@ -3,7 +3,8 @@
 second camera, the solver's answer and runner-up for it, the suggested camera, and the second view's pose after
 the suggested view was added. Azimuth is the angle, the polar angle from up the radius (the centre is straight
 above). Picks the first start following the suggestion whose second view was ambiguous on two views (``--start``
-picks another). Writes bench/results/next_best_view/ambiguous_case.png.
+picks another: docs/next_view.md shows start 6 of the committed results).
+Writes bench/results/next_best_view/ambiguous_case.png.
 
     python bench/next_view_figure.py
 """
@@ -66,7 +67,7 @@ def main() -> None:
         if not any(math.isnan(value) for value in where):
             ring = colour == "red"  # drawn as a ring, so that an unmoved answer still shows under the later one
             axes.scatter(*point(where), marker=marker, s=340 if ring else 140, facecolors="none" if ring else colour,
-                         edgecolors=colour, linewidths=2, label=label, zorder=2 if ring else 3)
+                         edgecolors=colour, linewidths=2, label=label, zorder=2 if ring else 4 if marker == "X" else 3)
     axes.set_rlim(0.0, 180.0)
     axes.set_rticks([30, 60, 90, 120, 150])
     axes.set_title(f"start {index} ({results['model']}, {results['preset']}): "

@@ -21,7 +21,13 @@ from idpose_core.pipeline import MODEL_IMAGE_SIZE, estimate_view_poses, result_d
 from idpose_core.solver import Progress, SolverConfig
 from idpose_core.view_input import ViewInput
 from idpose_ros.evaluation.replay import ReplayEstimator
-from idpose_ros.node.parameters import SOLVER_PARAMETERS, parameter_table, pipeline_settings, solver_config
+from idpose_ros.node.parameters import (
+    NEXT_VIEW_PARAMETERS,
+    SOLVER_PARAMETERS,
+    parameter_table,
+    pipeline_settings,
+    solver_config,
+)
 
 NODE_BOUNDS = {name: spec["bounds"] for name, _, spec in parameter_table()}
 NODE_DEFAULTS = {name: default for name, default, _ in parameter_table()}
@@ -51,8 +57,8 @@ class EstimatorOptions:
 
     def node_values(self) -> dict[str, Any]:
         """The node's parameter values that shape an estimate: the solver's (the preset, the variant and
-        the overrides), ``image_size`` and the depth refinement's; both modes run on exactly these. ValueError
-        names a bad one."""
+        the overrides), ``image_size``, the depth refinement's and the next view's (the node's defaults); both
+        modes run on exactly these. ValueError names a bad one."""
         config = SolverConfig.preset(self.preset)
         values = {"preset": self.preset, **{name: getattr(config, name) for name in SOLVER_PARAMETERS}}
         if self.variant is not None:
@@ -72,7 +78,8 @@ class EstimatorOptions:
         if not low <= self.image_size <= high:
             raise ValueError(f"--image-size must be in [{low}, {high}] pixels, got {self.image_size}")
         return {**values, "image_size": self.image_size, "depth_refinement": self.depth_refinement,
-                "cloud_voxel_size": NODE_DEFAULTS["cloud_voxel_size"]}
+                "cloud_voxel_size": NODE_DEFAULTS["cloud_voxel_size"],
+                **{name: NODE_DEFAULTS[name] for name in NEXT_VIEW_PARAMETERS}}
 
 
 class OfflineEstimator:

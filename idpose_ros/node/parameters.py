@@ -219,6 +219,10 @@ def solver_config(values: dict[str, Any]) -> SolverConfig:
     return SolverConfig(anchor_polar_deg=values["anchor_polar_deg"], **exposed)
 
 
+NEXT_VIEW_PARAMETERS = ("next_view_polar_deg", "next_view_azimuth_deg", "next_view_distance", "next_view_step_deg",
+                        "next_view_criterion")
+
+
 def reachable_set(values: dict[str, Any]) -> ReachableSet:
     """Where the next camera may stand, from the ``next_view_*`` parameters. Raises ValueError naming the range at
     fault (a range is two numbers, low then high)."""
