@@ -44,6 +44,7 @@ from idpose_ros.dataset.synthetic_bag import SyntheticBagOptions, make_bag
 from idpose_ros.evaluation.bag_evaluation import evaluate_bag, plan_bag
 from idpose_ros.evaluation.bag_report import RANDOM_METHOD, write_report  # noqa: E402
 from idpose_ros.evaluation.bag_views import load_views
+from idpose_ros.evaluation.demo_run import demo_bags
 from idpose_ros.evaluation.estimators import EstimatorOptions, make_estimator
 from idpose_ros.evaluation.ground_truth import GroundTruthOptions, read_views
 
@@ -158,7 +159,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
     started = time.monotonic()
-    bags = {"demo bags": sorted((ROOT / "data" / "demo_bags").iterdir()), "textured objects": []}
+    bags = {"demo bags": demo_bags(), "textured objects": []}
     for spec in textured_objects():
         bag = args.work_dir / "bags" / spec.name
         if not bag.exists():
