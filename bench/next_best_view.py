@@ -109,6 +109,8 @@ def main() -> None:
     parser.add_argument("--starts", type=int, default=48, help="loops per policy (objects cycle after 48)")
     parser.add_argument("--views", type=int, default=5, help="views at the end of a loop")
     parser.add_argument("--preset", default="live", choices=sorted(PRESETS))
+    parser.add_argument("--keep-top", type=int, default=None,
+                        help="candidates kept per view (the preset's when absent): a later view re-chooses among them")
     parser.add_argument("--policies", nargs="+", default=list(POLICIES), choices=POLICIES)
     parser.add_argument("--image-size", type=int, default=256, help="render side in pixels")
     parser.add_argument("--seed", type=int, default=9090, help="starts, lights and the random policy's draws")
@@ -125,7 +127,8 @@ def main() -> None:
     objects = heldout_objects(*BENCH_HELDOUT)
     lights = [random_light(rng) for _ in objects]
     starts = random_starts(objects, lights, args.starts, reachable, CAMERA_RADIUS, rng)
-    settings = PipelineSettings(SolverConfig.preset(args.preset), object_distance=CAMERA_RADIUS,
+    overrides = {} if args.keep_top is None else {"keep_top": args.keep_top}
+    settings = PipelineSettings(SolverConfig.preset(args.preset, **overrides), object_distance=CAMERA_RADIUS,
                                 reachable=reachable)
     loops: dict[str, list[list[LoopStep]]] = {policy: [] for policy in args.policies}
     baseline = []
@@ -146,7 +149,8 @@ def main() -> None:
     print(table(rows))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({
-        "model": args.model, "preset": args.preset, "starts": args.starts, "views": args.views, "seed": args.seed,
+        "model": args.model, "preset": args.preset, "solver_overrides": overrides, "starts": args.starts,
+        "views": args.views, "seed": args.seed,
         "objects": f"BENCH_HELDOUT {BENCH_HELDOUT}: {len(objects)} held-out objects, a random lamp each",
         "reachable": {"polar_deg": reachable.polar_deg, "azimuth_deg": reachable.azimuth_deg,
                       "step_deg": reachable.step_deg},
