@@ -52,7 +52,7 @@ def random_pose_errors(start: CaptureStart, cameras: list[np.ndarray], rng: np.r
     for k, camera in enumerate(cameras, start=1):
         guesses = np.tile(camera, (RANDOM_DRAWS, 1))
         guesses[:, 1] = rng.uniform(-math.pi, math.pi, RANDOM_DRAWS)
-        poses = np.stack([first_camera_frame_poses(np.stack([start.anchor, guess]))[1] for guess in guesses])
+        poses = first_camera_frame_poses(np.vstack([start.anchor, guesses]))[1:]
         errors.append(rotation_angle_deg(poses[:, :3, :3], truth[k, :3, :3]))
     return np.array(errors)
 

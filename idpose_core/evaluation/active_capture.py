@@ -75,19 +75,10 @@ def random_starts(objects: list[ObjectSpec], lights: list[Light], count: int, re
         while True:
             offset = np.radians([rng.uniform(*reachable.polar_deg), rng.uniform(*reachable.azimuth_deg)])
             second = np.array([offset[0], anchor[1] + offset[1], distance])
-            if math.degrees(_angle(anchor, second)) >= MIN_START_SEPARATION_DEG:
+            if math.degrees(angles_between(anchor[None], second[None])[0, 0]) >= MIN_START_SEPARATION_DEG:
                 break
         starts.append(CaptureStart(objects[k % len(objects)], lights[k % len(lights)], anchor, second))
     return starts
-
-
-def _angle(sphere_a: np.ndarray, sphere_b: np.ndarray) -> float:
-    """Angle (rad) between two spheres' viewing directions from the object centre."""
-    def direction(sphere: np.ndarray) -> np.ndarray:
-        polar, azimuth = sphere[0], sphere[1]
-        return np.array([math.sin(polar) * math.cos(azimuth), math.sin(polar) * math.sin(azimuth), math.cos(polar)])
-
-    return math.acos(float(np.clip(direction(sphere_a) @ direction(sphere_b), -1.0, 1.0)))
 
 
 def rendered_view(renderer: SceneRenderer, sphere: np.ndarray, light: Light) -> ViewInput:
