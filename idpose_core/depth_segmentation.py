@@ -43,8 +43,10 @@ SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough
 # (``stands``) stands on it (a curved bottom starts a few cm up); one without is carried by another piece
 FOOT_SHARE = 0.004  # of a piece's readings that must lie within SUPPORT_HEIGHT of the plane for it to stand on it
 FOOT_PIXELS = 8  # ... and at least this many: a thin leg in sight is enough, a speck of noise is not
-ATTACH_GAP = 0.08  # m: a carried piece's edge points lie this close to the piece carrying it (median); a head on a
-# 20 cm body comes within 5 cm, a ball before a box that stands apart 13 cm or more
+ATTACH_GAP = 0.08  # m, or ATTACH_GAP_SHARE of the depth when larger: a carried piece's edge points lie this close
+# to the piece carrying it (median); a head on a 20 cm body comes within 5 cm, a ball before a box that stands apart
+# 13 cm or more; farther away the objects a camera frames are larger (a 1 m ball's marker stands 11 cm off at 1.1 m)
+ATTACH_GAP_SHARE = 0.12  # of the median depth of the edge points (ATTACH_GAP)
 CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most of its points along their shared
 # edge lie this far inside the piece's footprint (a table's legs under its top; a box behind the top lies outside)
 MIN_SHARED_EDGE = 0.05  # of a carried piece's outline: it touches what carries it along more than this (a table
@@ -56,6 +58,7 @@ ROOM_HEIGHT = 0.3  # m above the plane: a piece this low is an object even where
 UP_BORDER_COSINE = 0.3  # a border is an upper one when the up direction's image direction points this much at it
 GRABCUT_ITERATIONS = 4
 GRABCUT_BAND = 0.04  # of the piece's bounding-box diagonal: how far outside its edge GrabCut may grow it
+HOLE_REACH = 4  # GrabCut's band reaches this many times as far through pixels without a depth reading
 CORE_MARGIN = 2  # px inside the piece's edge that GrabCut may take away (thin legs stay)
 BASE_MARGIN = 0.002  # m, or 0.4 % of the depth when larger: how far outside the piece's footprint on the plane a
 # reading may lie and still be the piece's base (the band under ``MIN_HEIGHT`` that the height test leaves out)
@@ -169,10 +172,14 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
 
 def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[int, np.ndarray]:
     """Connected pieces of ``above`` that no depth jump crosses: (count, labels). Holes in the depth (no reading)
-    that ``above`` pixels close around count as part of the piece."""
+    that ``above`` pixels close around count as part of the piece, each with its nearest reading's depth: a stereo
+    camera's shadow between an object and the wall behind it keeps the jump between them instead of bridging it."""
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     closed = cv2.morphologyEx(above.astype(np.uint8), cv2.MORPH_CLOSE, kernel).astype(bool)
-    above = above | (closed & ~valid)
+    holes = closed & ~valid
+    above = above | holes
+    depth = np.where(holes, depth.ravel()[_nearest_index(valid)], depth)
+    valid = valid | holes
     jump = np.zeros_like(above)
     inverse = np.where(valid, 1.0 / np.where(valid, depth, 1.0), np.nan)
     for axis in (0, 1):
@@ -211,6 +218,12 @@ def _gap(front: np.ndarray, back: np.ndarray) -> float:
     return float(np.median(np.min(np.linalg.norm(front[:, None] - back[None], axis=-1), axis=1)))
 
 
+def _attach_gap(edge: np.ndarray) -> float:
+    """The most a piece's ``edge`` points (N, 3) may lie from a piece they are attached to (m): ``ATTACH_GAP``, or
+    its share of their median depth when larger."""
+    return float(_tolerance(np.median(edge[:, 2]), ATTACH_GAP, ATTACH_GAP_SHARE))
+
+
 def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: np.ndarray, height: np.ndarray,
                       points: np.ndarray, valid: np.ndarray, plane: Plane) -> list[int]:
     """The neighbours that carry ``piece`` (its pixels ``inside``, the band around it ``ring``) from beneath: along
@@ -228,7 +241,7 @@ def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: 
         edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & own
         if not meeting.any() or not edge.any() or np.median(height[meeting]) >= np.median(height[edge]):
             continue
-        if (_gap(points[edge], points[meeting]) < ATTACH_GAP
+        if (_gap(points[edge], points[meeting]) < _attach_gap(points[edge])
                 and over_footprint(points[own], points[meeting], plane, -CARRIER_INSET).mean() > 0.5):
             carriers.append(int(other))
     return carriers
@@ -296,7 +309,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
             if length <= max(best_shared, MIN_SHARED_EDGE * ring.sum()) or not edge.any() or not behind.any():
                 continue
             if (np.median(depth[edge]) < np.median(depth[behind])
-                    and _gap(points[edge], points[behind]) < ATTACH_GAP):
+                    and _gap(points[edge], points[behind]) < _attach_gap(points[edge])):
                 best, best_shared = other, length
         if best:
             labels[inside] = best
@@ -383,14 +396,19 @@ def _opened(labels: np.ndarray) -> np.ndarray:
     return opened
 
 
+def _nearest_index(known: np.ndarray) -> np.ndarray:
+    """(H, W) int: the flat index of the nearest ``known`` (H, W) bool pixel to each pixel (itself where known)."""
+    _, nearest = cv2.distanceTransformWithLabels((~known).astype(np.uint8), cv2.DIST_L2, 5,
+                                                 labelType=cv2.DIST_LABEL_PIXEL)
+    lookup = np.zeros(int(nearest.max()) + 1, np.int64)
+    lookup[nearest[known]] = np.flatnonzero(known)
+    return lookup[nearest]
+
+
 def _nearest_fill(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
     """``seeds`` (H, W) int (0: unlabelled) with every pixel of ``region`` (H, W) bool given the label of the nearest
     seed."""
-    _, nearest = cv2.distanceTransformWithLabels((seeds == 0).astype(np.uint8), cv2.DIST_L2, 5,
-                                                 labelType=cv2.DIST_LABEL_PIXEL)
-    lookup = np.zeros(int(nearest.max()) + 1, seeds.dtype)
-    lookup[nearest[seeds > 0]] = seeds[seeds > 0]
-    return np.where(region, lookup[nearest], seeds)
+    return np.where(region, seeds.ravel()[_nearest_index(seeds != 0)], seeds)
 
 
 def _grown(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
@@ -595,11 +613,13 @@ def _fill_holes(mask: np.ndarray) -> np.ndarray:
     return filled.astype(bool)
 
 
-def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) -> np.ndarray:
+def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray, unread: np.ndarray) -> np.ndarray:
     """GrabCut on a window around ``seed`` (H, W) bool: the seed but its outermost pixels is object, and so are its
     parts too thin to have an inside (a toy table's legs, its top seen edge on, whatever their colour);
     ``background`` and what lies beyond a band around the seed are background, the rest is left to the
-    colours. Seeds OpenCV's RNG."""
+    colours. The band reaches ``HOLE_REACH`` times as far into ``unread`` pixels (no depth reading) that touch the
+    seed: a stereo camera reads nothing on a surface seen at a grazing angle (a box's top from low down), which
+    only the colours can give back. Seeds OpenCV's RNG."""
     seed_u8 = seed.astype(np.uint8)
     x, y, w, h = cv2.boundingRect(seed_u8)
     band = max(2, int(round(GRABCUT_BAND * math.hypot(w, h))))
@@ -608,6 +628,10 @@ def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) ->
     core = cv2.erode(seed_u8, edge).astype(bool)
     core |= seed & ~cv2.morphologyEx(seed_u8, cv2.MORPH_OPEN, edge).astype(bool)
     reach = cv2.dilate(seed_u8, kernel).astype(bool)
+    far = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * HOLE_REACH * band + 1,) * 2)
+    holes = (unread | seed) & cv2.dilate(seed_u8, far).astype(bool)
+    parts = cv2.connectedComponents(holes.astype(np.uint8), connectivity=4)[1]
+    reach |= np.isin(parts, np.unique(parts[seed]))
     labels = np.full(seed.shape, cv2.GC_BGD, np.uint8)
     labels[reach] = cv2.GC_PR_BGD
     labels[seed] = cv2.GC_PR_FGD
@@ -615,9 +639,9 @@ def grabcut_refine(rgb: np.ndarray, seed: np.ndarray, background: np.ndarray) ->
     labels[core] = cv2.GC_FGD
     if not core.any():  # a thin object: keep the depth's answer
         return seed
-    margin = 2 * band
-    top, left = max(0, y - margin), max(0, x - margin)
-    bottom, right = min(seed.shape[0], y + h + margin), min(seed.shape[1], x + w + margin)
+    x, y, w, h = cv2.boundingRect(reach.astype(np.uint8))  # the window: what GrabCut may take, and a band beyond
+    top, left = max(0, y - band), max(0, x - band)
+    bottom, right = min(seed.shape[0], y + h + band), min(seed.shape[1], x + w + band)
     cv2.setRNGSeed(0)
     refined = np.zeros(seed.shape, bool)
     refined[top:bottom, left:right] = grabcut_object(rgb[top:bottom, left:right], labels[top:bottom, left:right],
@@ -638,7 +662,7 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     depth = np.where(valid, view.depth, 0.0)
     threshold = _tolerance(depth, MIN_HEIGHT, 0.015)
     count, labels = _pieces(valid & (height > threshold), depth, valid)
-    known_height = np.where(valid, height, 0.0)
+    known_height = height.ravel()[_nearest_index(valid)]  # a hole has its nearest reading's height
     count, labels, apart = split_touching(labels, count, points, known_height, threshold + FOOT_BAND, view.rgb)
     labels = merge_carried_pieces(labels, count, known_height, points, valid, _tolerance(depth, SUPPORT_HEIGHT, 0.05),
                                   plane, apart)
@@ -650,7 +674,7 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
         note = ("the piece nearest the image centre runs out of the image upwards and was left out as the room (an "
                 "object cut off at the image's top?)")
     piece = _fill_holes(recover_base(piece, points, valid, height, plane, threshold))
-    mask = grabcut_refine(view.rgb, piece, on_plane) if refine else piece
+    mask = grabcut_refine(view.rgb, piece, on_plane, ~valid) if refine else piece
     return DepthCut(mask=mask, depth_mask=piece, plane=plane, note=note)
 
 
