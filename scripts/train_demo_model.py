@@ -10,7 +10,8 @@ budget. One sitting trains at most ``--chunk-minutes`` and ends with a checkpoin
 same command to go on (from the checkpoint in --work-dir, or, on another machine, from a model folder given by
 ``--init-from``). Logs the true-vs-wrong-pose loss gap and a grid-search inversion check on held-out objects
 (``random_urdfs`` 800-899 and held-out toys; 900-999 are never used) and on held-out cameras of the demo objects to
-``curve.csv`` against training minutes.
+``curve.csv`` against training minutes; the model folder carries the whole lineage's curve (CSV and PNG), so a
+sitting started with ``--init-from`` goes on with it.
 
 A growing share of the pairs are a robot's crops: the cameras rendered again under random lamps with shadows, in a
 camera's tone, the reference augmented by ``idpose_core.demo_model.robot_crops``. The share is 0 while the model
@@ -25,6 +26,7 @@ import argparse
 import csv
 import json
 import math
+import shutil
 import sys
 import time
 from dataclasses import asdict
@@ -355,6 +357,8 @@ def main() -> None:
     print(f"{data.catalogue.num_objects} catalogue + {data.demo.num_objects} demo objects; random poses on the "
           f"held-out check pairs: {held_out.random_baseline(args.seed)}")
     curve_path = args.work_dir / "curve.csv"
+    if not curve_path.is_file() and args.init_from is not None and (args.init_from / "curve.csv").is_file():
+        shutil.copyfile(args.init_from / "curve.csv", curve_path)  # the lineage's curve goes on where it stopped
     new_curve = not curve_path.is_file()
     curve = curve_path.open("a", newline="")
     writer = csv.writer(curve)
@@ -451,8 +455,9 @@ def main() -> None:
                         "grid": f"{CHECK_AZIMUTHS} azimuths x polar offsets {CHECK_POLARS_DEG}"},
     }, indent=2) + "\n")
     curve.close()
-    plot_curve(curve_path, args.work_dir / "curve.png")
-    print(f"wrote {args.out} and {args.work_dir / 'curve.png'}")
+    shutil.copyfile(curve_path, args.out / "curve.csv")
+    plot_curve(curve_path, args.out / "curve.png")
+    print(f"wrote {args.out} with its curve.csv and curve.png")
 
 
 def plot_curve(curve_path: Path, png_path: Path) -> None:

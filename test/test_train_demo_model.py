@@ -60,15 +60,19 @@ def test_training_resumes_and_writes_a_loadable_model_with_its_records(tmp_path)
 
 @pytest.mark.slow
 def test_a_fresh_work_dir_goes_on_from_a_model_folder(tmp_path):
-    """Another machine, without the checkpoint: --init-from takes the weights, steps and minutes of the folder."""
+    """Another machine, without the checkpoint: --init-from takes the weights, steps and minutes of the folder,
+    and its curve goes on in the new model folder."""
     first_out = tmp_path / "first"
     assert train(tmp_path / "work_a", first_out, 2).returncode == 0
     out = tmp_path / "second"
-    run = train(tmp_path / "work_b", out, 3, "--init-from", str(first_out))
+    run = train(tmp_path / "work_b", out, 4, "--init-from", str(first_out))
     assert run.returncode == 0, run.stderr[-2000:]
     assert "initialised from" in run.stdout and "at step 2" in run.stdout
     training = json.loads((out / "training.json").read_text())
-    assert training["steps"] == 3 and [phase["from_step"] for phase in training["phases"]] == [0, 2]
+    assert training["steps"] == 4 and [phase["from_step"] for phase in training["phases"]] == [0, 2]
+    rows = (out / "curve.csv").read_text().splitlines()
+    assert rows[0].startswith("step,") and [row.split(",")[0] for row in rows[1:]] == ["2", "4"]
+    assert (out / "curve.png").stat().st_size > 0
 
 
 @pytest.mark.slow
