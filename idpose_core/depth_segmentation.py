@@ -170,15 +170,16 @@ def support_plane(points: np.ndarray, up: np.ndarray | None, rng: np.random.Gene
     return Plane(normal, float(-normal @ centre))
 
 
-def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray) -> tuple[int, np.ndarray]:
+def _pieces(above: np.ndarray, depth: np.ndarray, valid: np.ndarray, nearest: np.ndarray) -> tuple[int, np.ndarray]:
     """Connected pieces of ``above`` that no depth jump crosses: (count, labels). Holes in the depth (no reading)
-    that ``above`` pixels close around count as part of the piece, each with its nearest reading's depth: a stereo
-    camera's shadow between an object and the wall behind it keeps the jump between them instead of bridging it."""
+    that ``above`` pixels close around count as part of the piece, each with its nearest reading's depth (``nearest``:
+    ``_nearest_index(valid)``): a stereo camera's shadow between an object and the wall behind it keeps the jump
+    between them instead of bridging it."""
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     closed = cv2.morphologyEx(above.astype(np.uint8), cv2.MORPH_CLOSE, kernel).astype(bool)
     holes = closed & ~valid
     above = above | holes
-    depth = np.where(holes, depth.ravel()[_nearest_index(valid)], depth)
+    depth = np.where(holes, depth.ravel()[nearest], depth)
     valid = valid | holes
     jump = np.zeros_like(above)
     inverse = np.where(valid, 1.0 / np.where(valid, depth, 1.0), np.nan)
@@ -661,8 +662,9 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     height = plane.height(points)
     depth = np.where(valid, view.depth, 0.0)
     threshold = _tolerance(depth, MIN_HEIGHT, 0.015)
-    count, labels = _pieces(valid & (height > threshold), depth, valid)
-    known_height = height.ravel()[_nearest_index(valid)]  # a hole has its nearest reading's height
+    nearest = _nearest_index(valid)
+    count, labels = _pieces(valid & (height > threshold), depth, valid, nearest)
+    known_height = height.ravel()[nearest]  # a hole has its nearest reading's height
     count, labels, apart = split_touching(labels, count, points, known_height, threshold + FOOT_BAND, view.rgb)
     labels = merge_carried_pieces(labels, count, known_height, points, valid, _tolerance(depth, SUPPORT_HEIGHT, 0.05),
                                   plane, apart)

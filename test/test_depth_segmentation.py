@@ -393,14 +393,14 @@ def test_a_shadow_without_readings_between_an_object_and_the_wall_behind_keeps_t
     """A stereo camera reads nothing in a 2 px band beside an object's edge, on the wall behind it: the holes are
     closed into the pieces with their nearest reading's depth, so the jump between object and wall stays (the
     band once bridged them into one piece)."""
-    from idpose_core.depth_segmentation import _pieces
+    from idpose_core.depth_segmentation import _nearest_index, _pieces
 
     depth = np.full((SIZE, SIZE), 1.2, np.float32)  # the wall
     depth[60:100, 60:100] = 0.5  # the object before it
     depth[58:60, 58:102] = depth[100:102, 58:102] = 0.0  # its shadow: no readings
     depth[58:102, 58:60] = depth[58:102, 100:102] = 0.0
     valid = depth > 0
-    count, labels = _pieces(np.ones((SIZE, SIZE), bool) & valid, depth, valid)
+    count, labels = _pieces(np.ones((SIZE, SIZE), bool) & valid, depth, valid, _nearest_index(valid))
     assert len(np.unique(labels[valid])) == 2
     assert labels[80, 80] != labels[10, 10]
     assert labels[59, 80] == labels[80, 80], "the shadow's row beside the object is closed into it"
