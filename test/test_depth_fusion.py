@@ -161,3 +161,15 @@ def test_the_object_box_follows_gravity_or_the_anchor():
     assert anchored.axes_source == "anchor"
     np.testing.assert_array_equal(anchored.pose[:3, :3], np.eye(3))
     assert anchored.size[2] > sides[2] + 0.02, "along the tilted camera's axes the box looks deeper"
+
+
+def test_the_gate_bounds_the_inlier_rmse_at_0_95_voxels():
+    """A fit looser than 0.95 voxels (a slide along a smooth surface fits about so) keeps the seed; a tighter one
+    passes; the note names the bound in mm."""
+    from idpose_core.depth_fusion.refinement import RefinementSettings, gate
+    from idpose_core.depth_fusion.registration import Registration
+
+    seed, voxel = np.eye(4), 0.004
+    loose = gate(Registration(seed, 0.8, 1.0 * voxel), seed, voxel, 0.5, RefinementSettings())
+    assert loose == "depth registration rejected: inlier RMSE 4.0 mm > 3.8 mm"
+    assert gate(Registration(seed, 0.8, 0.9 * voxel), seed, voxel, 0.5, RefinementSettings()) == ""

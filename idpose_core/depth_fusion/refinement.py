@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from idpose_core.depth_fusion.clouds import ObjectCloud, fused_cloud, view_cloud
-from idpose_core.depth_fusion.registration import Registration, register
+from idpose_core.depth_fusion.registration import POLISH, SCHEDULES, Registration, register
 from idpose_core.depth_segmentation import DepthSegmentationError, object_centre
 from idpose_core.view_input import ViewInput
 
@@ -34,7 +34,7 @@ class RefinementSettings:
     views, how many times each view is registered again onto all the others."""
 
     min_fitness: float = 0.3
-    max_rmse_voxels: float = 1.2
+    max_rmse_voxels: float = 0.95
     max_rotation_change_deg: float = 35.0
     max_translation_share: float = 0.5
     joint_rounds: int = 2
@@ -145,8 +145,8 @@ def refine_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
             partners = [0] if round_index == 0 else [j for j in range(len(views)) if j != k and
                                                      (j == 0 or reports[j].refined)]
             target = np.concatenate([clouds[j].transformed(current[j]).points for j in partners])
-            start = current[k] if reports[k].refined else seeds[k]
-            registration = register(clouds[k].points, target, start, voxel, extent)
+            start, schedules = (current[k], POLISH) if reports[k].refined else (seeds[k], SCHEDULES)
+            registration = register(clouds[k].points, target, start, voxel, extent, schedules)
             note = gate(registration, seeds[k], voxel, distance, settings)
             if note and reports[k].refined:
                 continue  # a later round that fails the gate leaves the earlier refined pose

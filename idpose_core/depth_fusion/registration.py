@@ -6,6 +6,7 @@ Geometry alone cannot tell a smooth object's turns apart: the gate in ``refineme
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,9 @@ ITERATIONS = 40  # per stage
 # object slides); every schedule runs, and of those that fit about as well as the best (``FITNESS_SLACK``) the one
 # nearest the seed wins.
 SCHEDULES = ((0.25, 0.1, 0.05, 0.025), (0.1, 0.05, 0.025), (0.05, 0.025), (0.025,))
+# A pose registration already found is only polished: far matches onto other views' points would let a smooth or
+# symmetric object slide off it (a mug turned about its axis fits the fused points as well).
+POLISH = SCHEDULES[-1:]
 FITNESS_SLACK = 0.05
 
 
@@ -31,16 +35,16 @@ class Registration:
     inlier_rmse: float
 
 
-def register(source: np.ndarray, target: np.ndarray, initial: np.ndarray, voxel_size: float,
-             extent: float) -> Registration:
+def register(source: np.ndarray, target: np.ndarray, initial: np.ndarray, voxel_size: float, extent: float,
+             schedules: Sequence[tuple[float, ...]] = SCHEDULES) -> Registration:
     """Register ``source`` (M, 3) onto ``target`` (K, 3) from ``initial`` (4, 4, source frame in target frame):
-    GICP on clouds thinned to ``voxel_size``, for each of the ``SCHEDULES`` matching points up to its shares of the
+    GICP on clouds thinned to ``voxel_size``, for each of the ``schedules`` matching points up to its shares of the
     object's ``extent`` (m) apart, from far to near; of the fits within ``FITNESS_SLACK`` of the best fitness
     (measured at 2 voxels), the one that turns the source least from ``initial`` wins."""
     target_cloud, target_tree = small_gicp.preprocess_points(target, voxel_size, num_neighbors=NEIGHBOURS)
     source_cloud, _ = small_gicp.preprocess_points(source, voxel_size, num_neighbors=NEIGHBOURS)
     found = []
-    for schedule in SCHEDULES:
+    for schedule in schedules:
         transform = np.asarray(initial, dtype=np.float64)
         for share in schedule:
             result = small_gicp.align(target_cloud, source_cloud, target_tree, init_T_target_source=transform,
