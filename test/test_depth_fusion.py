@@ -173,3 +173,28 @@ def test_the_gate_bounds_the_inlier_rmse_at_0_95_voxels():
     loose = gate(Registration(seed, 0.8, 1.0 * voxel), seed, voxel, 0.5, RefinementSettings())
     assert loose == "depth registration rejected: inlier RMSE 4.0 mm > 3.8 mm"
     assert gate(Registration(seed, 0.8, 0.9 * voxel), seed, voxel, 0.5, RefinementSettings()) == ""
+
+
+def test_a_fit_outside_the_trust_region_does_not_hide_one_inside_it():
+    """An L-shaped block seeded 30 deg off about z: unbounded, the far matches turn it all the way home (a perfect
+    fit, 30 deg from the seed); with a 10 deg trust region the best fit that stays inside it wins."""
+    from idpose_core.depth_fusion.registration import register, turn
+
+    rng = np.random.default_rng(0)
+
+    def box_surface(centre, sides, count):
+        points = rng.uniform(-0.5, 0.5, (count, 3))
+        face = rng.integers(0, 3, count)
+        points[np.arange(count), face] = np.sign(points[np.arange(count), face]) * 0.5
+        return np.asarray(centre) + points * np.asarray(sides)
+
+    block = np.concatenate([box_surface([0.0, 0.0, 0.0], [0.2, 0.05, 0.05], 6000),
+                            box_surface([0.075, 0.05, 0.0], [0.05, 0.1, 0.05], 3000)])
+    extent = float(np.linalg.norm(np.ptp(block, axis=0)))
+    seed = np.eye(4)
+    seed[:3, :3] = Rotation.from_rotvec([0.0, 0.0, math.radians(30.0)]).as_matrix()
+    seed[:3, 3] = block.mean(0) - seed[:3, :3] @ block.mean(0)
+    free = register(block, block, seed, extent / 40, extent)
+    assert math.degrees(turn(free.transform, np.eye(4))) < 1.0 and free.fitness > 0.95
+    bounded = register(block, block, seed, extent / 40, extent, max_turn_deg=10.0)
+    assert math.degrees(turn(bounded.transform, seed)) <= 10.0 and bounded.fitness < free.fitness

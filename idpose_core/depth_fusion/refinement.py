@@ -146,7 +146,8 @@ def refine_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
                                                      (j == 0 or reports[j].refined)]
             target = np.concatenate([clouds[j].transformed(current[j]).points for j in partners])
             start, schedules = (current[k], POLISH) if reports[k].refined else (seeds[k], SCHEDULES)
-            registration = register(clouds[k].points, target, start, voxel, extent, schedules)
+            registration = register(clouds[k].points, target, start, voxel, extent, schedules,
+                                    settings.max_rotation_change_deg)
             note = gate(registration, seeds[k], voxel, distance, settings)
             if note and reports[k].refined:
                 continue  # a later round that fails the gate leaves the earlier refined pose

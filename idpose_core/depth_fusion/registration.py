@@ -6,6 +6,7 @@ Geometry alone cannot tell a smooth object's turns apart: the gate in ``refineme
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -36,11 +37,13 @@ class Registration:
 
 
 def register(source: np.ndarray, target: np.ndarray, initial: np.ndarray, voxel_size: float, extent: float,
-             schedules: Sequence[tuple[float, ...]] = SCHEDULES) -> Registration:
+             schedules: Sequence[tuple[float, ...]] = SCHEDULES, max_turn_deg: float = 180.0) -> Registration:
     """Register ``source`` (M, 3) onto ``target`` (K, 3) from ``initial`` (4, 4, source frame in target frame):
     GICP on clouds thinned to ``voxel_size``, for each of the ``schedules`` matching points up to its shares of the
     object's ``extent`` (m) apart, from far to near; of the fits within ``FITNESS_SLACK`` of the best fitness
-    (measured at 2 voxels), the one that turns the source least from ``initial`` wins."""
+    (measured at 2 voxels), the one that turns the source least from ``initial`` wins. Fits that turn it more than
+    ``max_turn_deg`` (the caller's trust region) compete only when no fit stays within it: a far slide that fits
+    better must not hide a fit inside the trust region."""
     target_cloud, target_tree = small_gicp.preprocess_points(target, voxel_size, num_neighbors=NEIGHBOURS)
     source_cloud, _ = small_gicp.preprocess_points(source, voxel_size, num_neighbors=NEIGHBOURS)
     found = []
@@ -53,8 +56,10 @@ def register(source: np.ndarray, target: np.ndarray, initial: np.ndarray, voxel_
             transform = np.asarray(result.T_target_source)
         fitness, rmse = alignment_quality(source_cloud.points()[:, :3], target_tree, transform, 2.0 * voxel_size)
         found.append(Registration(transform, fitness, rmse))
-    best = max(registration.fitness for registration in found)
-    near = [registration for registration in found if registration.fitness >= best - FITNESS_SLACK]
+    trusted = [registration for registration in found if turn(registration.transform, initial) <=
+               math.radians(max_turn_deg)] or found
+    best = max(registration.fitness for registration in trusted)
+    near = [registration for registration in trusted if registration.fitness >= best - FITNESS_SLACK]
     return min(near, key=lambda registration: turn(registration.transform, initial))
 
 
