@@ -12,7 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import ObjectCloud, object_frame, refine_with_depth, view_cloud
-from idpose_core.depth_fusion.refinement import rotation_between
+from idpose_core.depth_fusion.refinement import RefinementSettings, gate, rotation_between
+from idpose_core.depth_fusion.registration import Registration, register, turn
 from idpose_core.synthetic.scenes import demo_objects
 from idpose_core.synthetic.tabletop import (
     TabletopRenderer,
@@ -166,9 +167,6 @@ def test_the_object_box_follows_gravity_or_the_anchor():
 def test_the_gate_bounds_the_inlier_rmse_at_0_95_voxels():
     """A fit looser than 0.95 voxels (a slide along a smooth surface fits about so) keeps the seed; a tighter one
     passes; the note names the bound in mm."""
-    from idpose_core.depth_fusion.refinement import RefinementSettings, gate
-    from idpose_core.depth_fusion.registration import Registration
-
     seed, voxel = np.eye(4), 0.004
     loose = gate(Registration(seed, 0.8, 1.0 * voxel), seed, voxel, 0.5, RefinementSettings())
     assert loose == "depth registration rejected: inlier RMSE 4.0 mm > 3.8 mm"
@@ -178,8 +176,6 @@ def test_the_gate_bounds_the_inlier_rmse_at_0_95_voxels():
 def test_a_fit_outside_the_trust_region_does_not_hide_one_inside_it():
     """An L-shaped block seeded 30 deg off about z: unbounded, the far matches turn it all the way home (a perfect
     fit, 30 deg from the seed); with a 10 deg trust region the best fit that stays inside it wins."""
-    from idpose_core.depth_fusion.registration import register, turn
-
     rng = np.random.default_rng(0)
 
     def box_surface(centre, sides, count):
