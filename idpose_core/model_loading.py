@@ -46,8 +46,8 @@ def load_predictor(model_path: str, device: str = "auto", precision: str = "auto
                                  f"{WEIGHTS_FILE}; scripts/train_demo_model.py trains one)")
         logging.getLogger(__name__).warning(
             "model_path is empty: using the EMBEDDED DEMO MODEL (%s), a small diffusion model trained only on "
-            "the synthetic demo objects. It is a demonstration: poses of real objects need Zero-1-to-3 weights "
-            "(set model_path).", folder)
+            "the six synthetic demo objects: on any other object its poses are at chance. Poses of real objects "
+            "need Zero-1-to-3 weights (set model_path; docs/weights.md).", folder)
         return DemoPredictor.from_pretrained(folder, device, dtype)
     path = Path(model_path).expanduser()
     if (path / WEIGHTS_FILE).is_file() and (path / "config.json").is_file():

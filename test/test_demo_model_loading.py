@@ -25,7 +25,7 @@ def test_empty_model_path_loads_the_embedded_model_with_a_warning(tmp_path, monk
     assert isinstance(predictor, DemoPredictor)
     assert predictor.model.config == TINY
     assert predictor.solver_defaults == {"probe_t": 0.4, "refine_t_range": (0.4, 0.41)}
-    assert "EMBEDDED DEMO MODEL" in caplog.text and "Zero-1-to-3" in caplog.text
+    assert "EMBEDDED DEMO MODEL" in caplog.text and "at chance" in caplog.text and "Zero-1-to-3" in caplog.text
 
 
 def test_a_demo_model_folder_as_model_path_loads_that_model(tmp_path, caplog):
