@@ -25,7 +25,7 @@ from bench.depth_refinement import FOV, IMAGE_SIZE, SIZES, render_scene, turned_
 from bench.result_files import result_path
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import refine_with_depth, view_cloud
-from idpose_core.depth_fusion.refinement import rotation_between
+from idpose_core.metrics import rotation_angle_deg
 from idpose_core.preprocessing import foreground_mask
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects
 from idpose_core.synthetic.scenes import demo_objects
@@ -69,8 +69,8 @@ def main() -> None:
         seed = turned_truth(truth, np.linalg.inv(cameras[0])[:3, 3], rng)
         refined = refine_with_depth(views, masks, seed, radius / 20.0)
         clouds = [view_cloud(view, mask) for view, mask in zip(views, masks)]
-        errors = [rotation_between(p[:3, :3], t[:3, :3]) for p, t in zip(refined.poses[1:], truth[1:])]
-        seed_errors = [rotation_between(p[:3, :3], t[:3, :3]) for p, t in zip(seed[1:], truth[1:])]
+        errors = [rotation_angle_deg(p[:3, :3], t[:3, :3]) for p, t in zip(refined.poses[1:], truth[1:])]
+        seed_errors = [rotation_angle_deg(p[:3, :3], t[:3, :3]) for p, t in zip(seed[1:], truth[1:])]
         for column, (poses, title) in enumerate((
                 (seed, f"{spec.name} ({size}), seed: "
                        f"{', '.join(f'{e:.0f}' for e in seed_errors)} deg off"),

@@ -45,8 +45,8 @@ from tqdm import tqdm
 from bench.result_files import result_path
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import refine_with_depth
-from idpose_core.depth_fusion.refinement import rotation_between
 from idpose_core.depth_segmentation import backproject
+from idpose_core.metrics import rotation_angle_deg
 from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import PipelineSettings, estimate_view_poses
 from idpose_core.preprocessing import foreground_mask, mask_iou
@@ -107,7 +107,7 @@ def no_seed(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
 
 def view_errors(poses: np.ndarray, truth: np.ndarray) -> list[tuple[float, float]]:
     """(rotation error deg, position error cm) of every non-anchor view."""
-    return [(rotation_between(poses[k, :3, :3], truth[k, :3, :3]),
+    return [(rotation_angle_deg(poses[k, :3, :3], truth[k, :3, :3]),
              100.0 * float(np.linalg.norm(poses[k, :3, 3] - truth[k, :3, 3]))) for k in range(1, len(poses))]
 
 

@@ -12,8 +12,9 @@ from scipy.spatial.transform import Rotation
 
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import ObjectCloud, object_frame, refine_with_depth, view_cloud
-from idpose_core.depth_fusion.refinement import RefinementSettings, gate, rotation_between
-from idpose_core.depth_fusion.registration import Registration, register, turn
+from idpose_core.depth_fusion.refinement import RefinementSettings, gate
+from idpose_core.depth_fusion.registration import Registration, register
+from idpose_core.metrics import rotation_angle_deg
 from idpose_core.synthetic.scenes import demo_objects
 from idpose_core.synthetic.tabletop import (
     TabletopRenderer,
@@ -65,7 +66,7 @@ def turned(pose: np.ndarray, degrees: float, axis=(1.0, 2.0, 0.5)) -> np.ndarray
 
 
 def errors(pose: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
-    return rotation_between(pose[:3, :3], truth[:3, :3]), float(np.linalg.norm(pose[:3, 3] - truth[:3, 3]))
+    return rotation_angle_deg(pose[:3, :3], truth[:3, :3]), float(np.linalg.norm(pose[:3, 3] - truth[:3, 3]))
 
 
 def test_a_camera_aimed_beside_the_object_gets_its_metric_pose(scene):
@@ -79,7 +80,7 @@ def test_a_camera_aimed_beside_the_object_gets_its_metric_pose(scene):
     assert report.refined and report.note == "" and report.fitness >= 0.3
     rotation, translation = errors(refined.poses[1], truth[1])
     assert rotation < 1.0 and translation < 0.01, (rotation, translation)
-    assert report.rotation_change_deg == pytest.approx(rotation_between(diffusion[1, :3, :3],
+    assert report.rotation_change_deg == pytest.approx(rotation_angle_deg(diffusion[1, :3, :3],
                                                                         refined.poses[1, :3, :3]))
     np.testing.assert_array_equal(refined.poses[0], diffusion[0])
     assert (refined.views[0].refined, refined.views[0].note) == (False, "the anchor")
@@ -191,6 +192,6 @@ def test_a_fit_outside_the_trust_region_does_not_hide_one_inside_it():
     seed[:3, :3] = Rotation.from_rotvec([0.0, 0.0, math.radians(30.0)]).as_matrix()
     seed[:3, 3] = block.mean(0) - seed[:3, :3] @ block.mean(0)
     free = register(block, block, seed, extent / 40, extent)
-    assert math.degrees(turn(free.transform, np.eye(4))) < 1.0 and free.fitness > 0.95
+    assert rotation_angle_deg(free.transform[:3, :3], np.eye(3)) < 1.0 and free.fitness > 0.95
     bounded = register(block, block, seed, extent / 40, extent, max_turn_deg=10.0)
-    assert math.degrees(turn(bounded.transform, seed)) <= 10.0 and bounded.fitness < free.fitness
+    assert rotation_angle_deg(bounded.transform[:3, :3], seed[:3, :3]) <= 10.0 and bounded.fitness < free.fitness

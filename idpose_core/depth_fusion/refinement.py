@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 from idpose_core.depth_fusion.clouds import ObjectCloud, fused_cloud, view_cloud
 from idpose_core.depth_fusion.registration import POLISH, SCHEDULES, Registration, register
 from idpose_core.depth_segmentation import DepthSegmentationError, object_centre
+from idpose_core.metrics import rotation_angle_deg
 from idpose_core.view_input import ViewInput
 
 VOXEL_SHARE = 1.0 / 40.0  # of the anchor cloud's extent: the registration's voxel, so any object size works alike
@@ -66,11 +67,6 @@ class DepthRefinement:
     voxel_size: float
 
 
-def rotation_between(first: np.ndarray, second: np.ndarray) -> float:
-    """The angle (degrees) between two rotations (3, 3)."""
-    return math.degrees(Rotation.from_matrix(first.T @ second).magnitude())
-
-
 def aimed_at(ray: np.ndarray) -> np.ndarray:
     """The rotation (3, 3) that turns the optical axis onto ``ray`` (3,) by the shortest way: the frame of a camera
     aimed at the object, as the diffusion model sees it, in the real camera's frame."""
@@ -91,7 +87,8 @@ def depth_seed(diffusion_pose: np.ndarray, anchor_centre: np.ndarray, view_centr
 
 def pose_change(pose: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
     """(rotation in degrees, camera displacement in m) from ``reference`` to ``pose`` (both (4, 4))."""
-    return rotation_between(reference[:3, :3], pose[:3, :3]), float(np.linalg.norm(pose[:3, 3] - reference[:3, 3]))
+    rotation = float(rotation_angle_deg(pose[:3, :3], reference[:3, :3]))
+    return rotation, float(np.linalg.norm(pose[:3, 3] - reference[:3, 3]))
 
 
 def gate(registration: Registration, seed: np.ndarray, voxel_size: float, distance: float,

@@ -6,12 +6,13 @@ Geometry alone cannot tell a smooth object's turns apart: the gate in ``refineme
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import small_gicp
+
+from idpose_core.metrics import rotation_angle_deg
 
 NEIGHBOURS = 10  # points for each normal
 ITERATIONS = 40  # per stage
@@ -56,17 +57,12 @@ def register(source: np.ndarray, target: np.ndarray, initial: np.ndarray, voxel_
             transform = np.asarray(result.T_target_source)
         fitness, rmse = alignment_quality(source_cloud.points()[:, :3], target_tree, transform, 2.0 * voxel_size)
         found.append(Registration(transform, fitness, rmse))
-    trusted = [registration for registration in found if turn(registration.transform, initial) <=
-               math.radians(max_turn_deg)] or found
-    best = max(registration.fitness for registration in trusted)
-    near = [registration for registration in trusted if registration.fitness >= best - FITNESS_SLACK]
-    return min(near, key=lambda registration: turn(registration.transform, initial))
-
-
-def turn(transform: np.ndarray, initial: np.ndarray) -> float:
-    """The angle (rad) between two poses' rotations (4, 4 each)."""
-    relative = transform[:3, :3].T @ initial[:3, :3]
-    return float(np.arccos(np.clip((np.trace(relative) - 1.0) / 2.0, -1.0, 1.0)))
+    turns = rotation_angle_deg(np.stack([registration.transform[:3, :3] for registration in found]),
+                               np.asarray(initial)[:3, :3])
+    trusted = [k for k in range(len(found)) if turns[k] <= max_turn_deg] or list(range(len(found)))
+    best = max(found[k].fitness for k in trusted)
+    near = [k for k in trusted if found[k].fitness >= best - FITNESS_SLACK]
+    return found[min(near, key=lambda k: turns[k])]
 
 
 def alignment_quality(source: np.ndarray, target_tree: small_gicp.KdTree, transform: np.ndarray,
