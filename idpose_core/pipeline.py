@@ -23,6 +23,7 @@ from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, with_roll
 from idpose_core.next_view import NextView, ReachableSet, suggest_next_view, view_spheres
 from idpose_core.noise_predictor import NoisePredictor
+from idpose_core.pose_hypotheses import VerificationSettings, verify_with_depth
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
 from idpose_core.solver import Progress, SampleCount, SolverConfig, SolverResult, estimate_poses
 from idpose_core.view_input import ViewInput
@@ -37,6 +38,8 @@ ANCHOR_POLAR_RANGE_DEG = (1.0, 179.0)  # the anchor polar angles accepted: strai
 # outermost row or column): 2 px more allows for a mask boundary that stops a pixel or two short of the edge
 # (anti-aliasing, depth holes along the frame). Such an object is cut off, and the model compares a part.
 BORDER_MARGIN_PX = 2
+DEPTH_POSES = ("verify", "refine")  # how depth sets the poses: hypotheses from every source and one verifier, or
+# only the diffusion estimate refined by registration
 
 
 @dataclass(frozen=True)
@@ -44,10 +47,12 @@ class PipelineSettings:
     """How to estimate: the solver's settings (``solver.anchor_polar_deg`` is the anchor camera's polar
     angle around the object, None = level; gravity overrides it), the anchor's ``object_distance``
     (metres, the scale of the published positions; depth overrides it) and ``image_size``, the side of
-    the preprocessed views the model sees; ``depth_refinement``: refine the poses of views with depth by
-    registering their object points (``idpose_core.depth_fusion``), the fused cloud thinned to
-    ``cloud_voxel_size`` (m); ``reachable`` and ``next_view_criterion``: where the next camera may stand and how
-    it is chosen (``idpose_core.next_view``)."""
+    the preprocessed views the model sees; ``depth_refinement``: set the poses of views with depth from their
+    object points, the fused cloud thinned to ``cloud_voxel_size`` (m), as ``depth_poses`` says: "verify" chooses
+    among the hypotheses of every source (registration, gravity, the arm, the diffusion estimate) by one verifier
+    (``idpose_core.pose_hypotheses``, with ``verification``), "refine" refines the diffusion estimate by registration
+    (``idpose_core.depth_fusion``); ``reachable`` and ``next_view_criterion``: where the next camera may stand and
+    how it is chosen (``idpose_core.next_view``)."""
 
     solver: SolverConfig
     object_distance: float = 1.0
@@ -56,6 +61,12 @@ class PipelineSettings:
     cloud_voxel_size: float = 0.005
     reachable: ReachableSet = ReachableSet()
     next_view_criterion: str = "bridge"
+    depth_poses: str = "verify"
+    verification: VerificationSettings = VerificationSettings()
+
+    def __post_init__(self) -> None:
+        if self.depth_poses not in DEPTH_POSES:
+            raise ValueError(f"depth_poses must be one of {', '.join(DEPTH_POSES)}, got {self.depth_poses!r}")
 
 
 @dataclass(frozen=True)
@@ -176,6 +187,27 @@ def next_view_for(solved: SolverResult, polar_deg: float, distance: float, ancho
                              settings.next_view_criterion, anchor_roll)
 
 
+def depth_poses(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray, runners: np.ndarray,
+                settings: PipelineSettings) -> DepthRefinement | None:
+    """The poses of views with depth as ``settings.depth_poses`` sets them (None with ``depth_refinement`` off or no
+    object depth on the anchor)."""
+    if not settings.depth_refinement:
+        return None
+    if settings.depth_poses == "verify":
+        return verify_with_depth(views, masks, poses, runners, settings.cloud_voxel_size, settings.verification)
+    return refine_with_depth(views, masks, poses, settings.cloud_voxel_size)
+
+
+def with_refinement(report: ViewReport, refinement: ViewRefinement) -> ViewReport:
+    """The report with what depth did to its pose; where the verifier chose the pose (a finite margin), its verdict
+    replaces the solver's ambiguity in ``reliable``: the pose is reliable when its mask is whole in the image, no
+    pose of another cluster scores near it and the arm's pose, if given, agrees."""
+    if not math.isfinite(refinement.margin):
+        return replace(report, refinement=refinement)
+    trusted = not (report.touches_border or refinement.ambiguous or refinement.object_moved)
+    return replace(report, refinement=refinement, reliable=trusted)
+
+
 def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], settings: PipelineSettings,
                         progress: Progress | None = None, cancel: threading.Event | None = None,
                         samples: SampleCount | None = None) -> PipelineResult:
@@ -209,11 +241,12 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
                             progress=progress, cancel=cancel, known_polar=known_polar, samples=samples)
     poses = with_roll(anchor_frame_poses(solved.rel_poses, math.radians(polar_deg), distance), np.array(rolls))
     reports = with_ambiguity(reports, solved.ambiguous)
-    depth = refine_with_depth(views, masks, poses, settings.cloud_voxel_size) if settings.depth_refinement else None
+    runners = runner_up_poses(solved, polar_deg, distance, rolls)
+    depth = depth_poses(views, masks, poses, runners, settings)
     if depth is not None:
         poses = depth.poses
-        reports = [replace(report, refinement=refinement) for report, refinement in zip(reports, depth.views)]
-    return PipelineResult(poses=poses, runner_up_poses=runner_up_poses(solved, polar_deg, distance, rolls),
+        reports = [with_refinement(report, refinement) for report, refinement in zip(reports, depth.views)]
+    return PipelineResult(poses=poses, runner_up_poses=runners,
                           solver_result=solved, preprocessed=preprocessed, masks=masks, views=reports,
                           anchor_polar_deg=polar_deg,
                           polar_source="gravity" if anchor.polar_deg is not None else "parameter",

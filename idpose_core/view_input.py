@@ -4,7 +4,8 @@ Every field but ``rgb`` is optional; each one the robot provides makes the estim
 an external ``mask`` or an ``alpha`` channel marks the object, an aligned ``depth`` image with the
 camera ``intrinsics`` segments it from its support and measures its distance, and ``gravity_up``
 (world up in the camera's optical frame, from an IMU or the arm's kinematics) fixes the view's roll
-and elevation. Frames follow REP 103: optical x right, y down, z forward.
+and elevation; ``camera_pose`` (the camera's optical frame in a fixed frame, from the arm's kinematics or TF)
+proposes the relative pose between two views directly. Frames follow REP 103: optical x right, y down, z forward.
 """
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ class ViewInput:
     channel; ``mask`` (H, W) bool from an external segmentation (trusted over everything else);
     ``depth`` (H, W) float32 metres aligned to ``rgb`` (0 or NaN = no reading); ``intrinsics`` K (3, 3);
     ``gravity_up`` (3,) unit vector of world up in the optical frame; ``roi`` (x, y, width, height) in
-    pixels where the target object is, when several objects are in sight.
+    pixels where the target object is, when several objects are in sight; ``camera_pose`` (4, 4) the optical
+    frame in a fixed frame shared by the views (metres).
     """
 
     rgb: np.ndarray
@@ -35,6 +37,7 @@ class ViewInput:
     intrinsics: np.ndarray | None = None
     gravity_up: np.ndarray | None = None
     roi: tuple[int, int, int, int] | None = None
+    camera_pose: np.ndarray | None = None
 
     def check(self, name: str = "view 0") -> None:
         """Raise ``ViewInputError`` naming the view (``name``) and the field when an array is malformed."""
@@ -59,6 +62,12 @@ class ViewInput:
             up = np.asarray(self.gravity_up, dtype=np.float64)
             if up.shape != (3,) or not np.all(np.isfinite(up)) or abs(np.linalg.norm(up) - 1.0) > 1e-3:
                 raise ViewInputError(f"{name}: gravity_up must be a unit 3-vector, got {up.tolist()}")
+        if self.camera_pose is not None:
+            pose = np.asarray(self.camera_pose, dtype=np.float64)
+            if (pose.shape != (4, 4) or not np.all(np.isfinite(pose))
+                    or not np.allclose(pose[:3, :3] @ pose[:3, :3].T, np.eye(3), atol=1e-3)
+                    or not np.allclose(pose[3], [0.0, 0.0, 0.0, 1.0])):
+                raise ViewInputError(f"{name}: camera_pose must be a finite rigid 4x4 transform, got {pose.tolist()}")
         if self.roi is not None:
             x, y, width, height = self.roi
             if width <= 0 or height <= 0 or x >= shape[1] or y >= shape[0] or x + width <= 0 or y + height <= 0:

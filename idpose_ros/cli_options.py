@@ -14,6 +14,7 @@ from idpose_core.evaluation.picks import PICK_SIZE
 from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.gravity import rotation_from_extrinsic
 from idpose_core.model_loading import PRECISIONS
+from idpose_core.pipeline import DEPTH_POSES
 from idpose_core.solver.config import PRESETS, VARIANTS
 from idpose_ros.evaluation.bag_views import ExtraTopics
 from idpose_ros.evaluation.estimators import MODES, EstimatorOptions
@@ -37,7 +38,10 @@ def add_estimator_arguments(parser: argparse.ArgumentParser, preset: str = Estim
     group.add_argument("--image-size", type=int, default=default.image_size,
                        help=f"side of the preprocessed views the model sees (default {default.image_size})")
     group.add_argument("--depth-refinement", action=argparse.BooleanOptionalAction, default=default.depth_refinement,
-                       help="refine the poses of views with depth by registering their object points (default on)")
+                       help="set the poses of views with depth from their object points (default on)")
+    group.add_argument("--depth-poses", choices=DEPTH_POSES, default=default.depth_poses,
+                       help="with depth: verify (hypotheses from every source, one verifier) or refine (the "
+                            f"diffusion estimate refined by registration); default {default.depth_poses}")
     group.add_argument("--node", default=default.node,
                        help="replay: fully qualified name of a running estimator node (default: start one)")
     group.add_argument("--timeout", type=float, default=default.timeout,
@@ -48,7 +52,8 @@ def estimator_options(args: argparse.Namespace) -> EstimatorOptions:
     """The options ``add_estimator_arguments`` parsed."""
     return EstimatorOptions(mode=args.mode, model_path=args.model_path, device=args.device, precision=args.precision,
                             preset=args.preset, variant=args.variant, solver_params=tuple(args.solver_param),
-                            image_size=args.image_size, depth_refinement=args.depth_refinement, node=args.node,
+                            image_size=args.image_size, depth_refinement=args.depth_refinement,
+                            depth_poses=args.depth_poses, node=args.node,
                             timeout=args.timeout)
 
 

@@ -44,20 +44,32 @@ def depth_fields(refinement: ViewRefinement | None) -> dict[str, Any]:
     ran)."""
     if refinement is None:
         return {"depth_refined": False, "depth_note": "", "depth_fitness": math.nan, "depth_inlier_rmse": math.nan,
-                "depth_rotation_change_deg": 0.0, "depth_translation_change": 0.0}
+                "depth_rotation_change_deg": 0.0, "depth_translation_change": 0.0, "pose_source": "diffusion",
+                "verifier_margin": math.nan, "object_moved": False}
     return {"depth_refined": refinement.refined, "depth_note": refinement.note,
             "depth_fitness": refinement.fitness, "depth_inlier_rmse": refinement.inlier_rmse,
             "depth_rotation_change_deg": refinement.rotation_change_deg,
-            "depth_translation_change": refinement.translation_change}
+            "depth_translation_change": refinement.translation_change, "pose_source": refinement.source,
+            "verifier_margin": refinement.margin, "object_moved": refinement.object_moved}
 
 
 def refinement_of(view: ViewEstimate) -> ViewRefinement | None:
     """The ViewRefinement a ViewEstimate's depth fields carry (None when no refinement ran: an empty note)."""
     if not view.depth_note and not view.depth_refined:
         return None
+    margin = float(view.verifier_margin)
     return ViewRefinement(view.depth_refined, view.depth_note, float(view.depth_fitness),
                           float(view.depth_inlier_rmse), float(view.depth_rotation_change_deg),
-                          float(view.depth_translation_change))
+                          float(view.depth_translation_change), view.pose_source or "diffusion", margin,
+                          bool(view.ambiguous) if math.isfinite(margin) else False, view.object_moved)
+
+
+def view_ambiguous(view: ViewReport, solver_ambiguous: bool) -> bool:
+    """The verifier's ambiguity where it chose the view's pose (a finite margin), else the solver's."""
+    refinement = view.refinement
+    if refinement is not None and math.isfinite(refinement.margin):
+        return refinement.ambiguous
+    return solver_ambiguous
 
 
 def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[ViewEstimate]:
@@ -71,7 +83,7 @@ def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[Vi
         runner = result.runner_up_poses[k]
         estimates.append(ViewEstimate(
             header=header, pose=matrix_to_pose(result.poses[k]), confidence=float(confidence[k]),
-            score=float(scores[k]), ambiguous=bool(ambiguous[k]),
+            score=float(scores[k]), ambiguous=view_ambiguous(view, bool(ambiguous[k])),
             runner_up=matrix_to_pose(runner) if np.isfinite(runner).all() else no_pose(),
             roll_deg=_nan_if_none(view.roll_deg), polar_deg=_nan_if_none(view.polar_deg),
             mask_method=view.mask_method, mask_note=view.mask_note,

@@ -53,10 +53,10 @@ def decode_image(message: Image | CompressedImage, max_pixels: int | None = None
 
 def with_inputs(view: ViewInput, depth: Image | None = None, mask: Image | None = None,
                 camera_info: CameraInfo | None = None, gravity_up: np.ndarray | None = None,
-                roi: tuple[int, int, int, int] | None = None) -> ViewInput:
+                roi: tuple[int, int, int, int] | None = None, camera_pose: np.ndarray | None = None) -> ViewInput:
     """The view with these inputs decoded and added (None keeps what it has); AdapterError names the message
     that does not decode or does not fit the image (depth and mask must be aligned to it: the same width and
-    height; so must the CameraInfo)."""
+    height; so must the CameraInfo). ``camera_pose`` (4, 4): the camera's optical frame in a fixed frame."""
     height, width = view.rgb.shape[:2]
     decoded = {"depth": image_to_depth(depth) if depth is not None else None,
                "mask": image_to_mask(mask) if mask is not None else None}
@@ -74,6 +74,8 @@ def with_inputs(view: ViewInput, depth: Image | None = None, mask: Image | None 
         changes["gravity_up"] = np.asarray(gravity_up, dtype=np.float64)
     if roi is not None:
         changes["roi"] = roi
+    if camera_pose is not None:
+        changes["camera_pose"] = np.asarray(camera_pose, dtype=np.float64)
     return replace(view, **changes)
 
 

@@ -41,11 +41,12 @@ PROVIDED_BY = {
     "matplotlib": "python3-matplotlib",
     "torch": "python3-torch", "transformers": "python3-transformers-pip", "rosbags": "python3-rosbags-pip",
     "pybullet": "python3-pybullet-pip", "pybullet_data": "python3-pybullet-pip", "diffusers": None,
-    "safetensors": None, "ray": None, "pycolmap": None, "mcap": None, "small_gicp": None, "plyfile": None,
+    "safetensors": None, "ray": None, "pycolmap": None, "mcap": None, "small_gicp": None, "kiss_matcher": None,
+    "plyfile": None,
     **{name: name for name in [*ROS_PACKAGES, *WORKSPACE_PACKAGES]},
 }
 REQUIREMENT_OF = {"diffusers": "diffusers", "safetensors": "safetensors", "ray": "ray", "pycolmap": "pycolmap",
-                  "mcap": "mcap", "small_gicp": "small-gicp", "plyfile": "plyfile"}
+                  "mcap": "mcap", "small_gicp": "small-gicp", "kiss_matcher": "kiss-matcher", "plyfile": "plyfile"}
 OWN = {"idpose_core", "idpose_ros", "msg_adapters"}
 
 

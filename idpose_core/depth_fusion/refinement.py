@@ -45,7 +45,13 @@ class RefinementSettings:
 class ViewRefinement:
     """What depth did to one view's pose: ``refined`` (the pose is the registration's), ``note`` (why not, or
     empty), the registration's ``fitness`` and ``inlier_rmse`` (m; NaN where none ran), and how far the pose moved
-    from the diffusion pose (``rotation_change_deg``, ``translation_change`` in m; 0 when not refined)."""
+    from the diffusion pose (``rotation_change_deg``, ``translation_change`` in m; 0 when not refined).
+
+    Where the pose hypotheses and their verifier chose the pose (``idpose_core.pose_hypotheses``): ``source``, the
+    winner's (``diffusion``, ``registration``, ``gravity``, ``arm``; ``diffusion`` too for a view the refinement
+    only seeded from it), the verifier's ``margin`` over the runner-up from another cluster (NaN where no verifier
+    ran), ``ambiguous`` when that margin is too small to tell them apart, and ``object_moved`` when the arm's pose
+    lost clearly to another: the object likely moved between the views."""
 
     refined: bool
     note: str
@@ -53,6 +59,10 @@ class ViewRefinement:
     inlier_rmse: float
     rotation_change_deg: float
     translation_change: float
+    source: str = "diffusion"
+    margin: float = math.nan
+    ambiguous: bool = False
+    object_moved: bool = False
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,8 @@ class EstimatorOptions:
 
     ``solver_params`` are ``NAME=VALUE`` overrides of the node's solver parameters; ``node`` and
     ``timeout`` apply to ``mode="replay"`` (a running node's name, or None to start one here);
-    ``depth_refinement`` False keeps the diffusion poses of views with depth (the node's parameter).
+    ``depth_refinement`` False keeps the diffusion poses of views with depth, and ``depth_poses`` says how depth
+    sets them (the node's parameters).
     """
 
     mode: str = "offline"
@@ -52,6 +53,7 @@ class EstimatorOptions:
     solver_params: tuple[str, ...] = ()
     image_size: int = MODEL_IMAGE_SIZE
     depth_refinement: bool = True
+    depth_poses: str = NODE_DEFAULTS["depth_poses"]
     node: str | None = None
     timeout: float = 3600.0
 
@@ -78,7 +80,7 @@ class EstimatorOptions:
         if not low <= self.image_size <= high:
             raise ValueError(f"--image-size must be in [{low}, {high}] pixels, got {self.image_size}")
         return {**values, "image_size": self.image_size, "depth_refinement": self.depth_refinement,
-                "cloud_voxel_size": NODE_DEFAULTS["cloud_voxel_size"],
+                "depth_poses": self.depth_poses, "cloud_voxel_size": NODE_DEFAULTS["cloud_voxel_size"],
                 **{name: NODE_DEFAULTS[name] for name in NEXT_VIEW_PARAMETERS}}
 
 

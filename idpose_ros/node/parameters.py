@@ -18,7 +18,7 @@ from idpose_core.devices import DEVICE_CHOICES
 from idpose_core.gravity import IMU_WINDOW_S, rotation_from_extrinsic
 from idpose_core.model_loading import PRECISIONS
 from idpose_core.next_view import CRITERIA, ReachableSet
-from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, MODEL_IMAGE_SIZE, PipelineSettings
+from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, DEPTH_POSES, MODEL_IMAGE_SIZE, PipelineSettings
 from idpose_core.solver import SolverConfig
 from idpose_core.solver.config import KNOWN_POLAR_MODES, PRESETS, VARIANTS
 from idpose_core.stamps import INPUT_TOLERANCE_S
@@ -78,6 +78,10 @@ class NodeSettings:
         "refine the poses of views with depth and intrinsics by registering their object points onto the "
         "anchor's (metric 6-DoF poses, gated per view), and publish the fused object on ~/object_cloud and "
         "~/object_pose"))
+    depth_poses: str = field(default="verify", metadata=_spec(
+        "how depth sets the poses: verify (hypotheses from registration, gravity, the arm and the diffusion "
+        "estimate, chosen by one verifier on the views' depth) or refine (the diffusion estimate refined by "
+        "registration, within a trust region)", choices=DEPTH_POSES))
     cloud_voxel_size: float = field(default=0.005, metadata=_spec(
         "voxel (m) the published object cloud is thinned to", bounds=(0.0005, 0.5)))
     anchor_frame: str = field(default="", metadata=_spec(
@@ -240,7 +244,7 @@ def pipeline_settings(values: dict[str, Any]) -> PipelineSettings:
     refinement and where the next view may stand."""
     return PipelineSettings(solver_config(values), values["object_distance"], values["image_size"],
                             values["depth_refinement"], values["cloud_voxel_size"], reachable_set(values),
-                            values["next_view_criterion"])
+                            values["next_view_criterion"], values["depth_poses"])
 
 
 def node_settings(values: dict[str, Any]) -> NodeSettings:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.lifecycle import LifecycleNode
@@ -22,7 +23,7 @@ from idpose_ros.node.parameters import NodeSettings
 from idpose_ros.node.raw_image import RawImage
 from idpose_ros.node.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
 from idpose_ros.view_decoding import ViewMessages, with_inputs
-from msg_adapters import AdapterError, ImageTooLarge, stamp_nanoseconds
+from msg_adapters import AdapterError, ImageTooLarge, pose_to_matrix, stamp_nanoseconds
 
 THROTTLE = 5.0  # s between two log lines about refused images
 # An IMU publishes hundreds of readings a second: a deep best-effort queue keeps them while a callback runs.
@@ -36,6 +37,14 @@ def view_inputs_text(view: View) -> str:
                                      ("roi", view.input.roi)) if value is not None]
     pending = [f"{kind} pending" for kind in sorted(view.pending)]
     return "".join(f", {item}" for item in (["with " + ", ".join(have)] if have else []) + pending)
+
+
+def arm_pose(gravity_source: tuple) -> np.ndarray | None:
+    """The camera's optical frame (4, 4) in the fixed frame when its gravity came from one ``camera_pose`` message
+    (a PoseStamped from the arm's kinematics), else None."""
+    if len(gravity_source) == 1 and isinstance(gravity_source[0], PoseStamped):
+        return pose_to_matrix(gravity_source[0].pose)
+    return None
 
 
 class ViewIntake:
@@ -105,7 +114,8 @@ class ViewIntake:
                 self._logger.warning(f"{name}: kept without gravity ({matched.gravity_problem})",
                                      throttle_duration_sec=THROTTLE)
             roi = self._roi
-            pixels = with_inputs(pixels, matched.depth, matched.mask, matched.camera_info, matched.gravity_up, roi)
+            pixels = with_inputs(pixels, matched.depth, matched.mask, matched.camera_info, matched.gravity_up, roi,
+                                 arm_pose(matched.gravity_source))
             precheck_view(pixels, name)
             received = (ViewMessages(image.message, matched.depth, matched.mask, matched.camera_info,
                                      matched.gravity_up, roi, matched.gravity_source) if self._recorder.on else None)

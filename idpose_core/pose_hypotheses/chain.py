@@ -1,0 +1,88 @@
+"""Several views' poses chosen jointly: every pair's ranked hypotheses, composed through the views between.
+
+A wide pair (little overlap) is settled through a view between: view k's candidates are its own pair's with the
+anchor, and every other view's chosen pose composed with the hypotheses of that view's pair with k. Each
+candidate is scored against every view already placed, and the best wins; the runner-up is the best candidate of
+another cluster. The loop residual (how far the chosen pose is from what each placed view's best pair hypothesis
+says) measures how well the views agree.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from idpose_core.metrics import rotation_angle_deg
+from idpose_core.pose_hypotheses.hypothesis import ScoredHypothesis, Source
+from idpose_core.pose_hypotheses.pair import PairRanking, clusters_of, prior
+from idpose_core.pose_hypotheses.verifier import ViewEvidence, verify
+
+ROUNDS = 2  # passes over the views: a later pass sees every view placed
+
+
+@dataclass(frozen=True)
+class ChosenPose:
+    """One view's pose in the anchor's frame (``pose`` (4, 4)), the ``source`` of the hypothesis it came from, its
+    joint ``score``, its ``margin`` over the best candidate of another cluster, and the ``loop_residual_deg``: the
+    largest turn between the chosen pose and another placed view's best pair hypothesis for it (0 with two views)."""
+
+    pose: np.ndarray
+    source: Source
+    score: float
+    margin: float
+    loop_residual_deg: float
+
+
+def relative(rankings: Mapping[tuple[int, int], PairRanking], first: int, second: int) -> list[ScoredHypothesis]:
+    """The ranked hypotheses of view ``second`` in view ``first``'s frame (a pair is ranked once, lower index as
+    target: the reverse pair's transforms are inverted)."""
+    if (first, second) in rankings:
+        return rankings[(first, second)].clusters
+    return [ScoredHypothesis(np.linalg.inv(h.transform), h.source, h.score, h.object_score)
+            for h in rankings[(second, first)].clusters]
+
+
+def joint_score(evidence: Sequence[ViewEvidence | None], poses: Mapping[int, np.ndarray], view: int,
+                pose: np.ndarray, tolerance_floor: float) -> float:
+    """The verifier's scores of ``view`` at ``pose`` (4, 4, anchor frame) against every placed view, averaged."""
+    scores = [verify(evidence[other], evidence[view], np.linalg.inv(placed) @ pose, tolerance_floor).score
+              for other, placed in poses.items() if other != view]
+    return float(np.mean(scores))
+
+
+def choose_poses(evidence: Sequence[ViewEvidence | None], rankings: Mapping[tuple[int, int], PairRanking],
+                 extent: float, tolerance_floor: float) -> dict[int, ChosenPose]:
+    """Every view with evidence (index > 0) placed in the anchor's frame from the pairs' ``rankings`` (keyed by
+    (target, source) view indices, target < source)."""
+    placeable = [k for k in range(1, len(evidence)) if evidence[k] is not None and (0, k) in rankings]
+    order = sorted(placeable, key=lambda k: -rankings[(0, k)].margin)  # the surest views first
+    poses: dict[int, np.ndarray] = {0: np.eye(4)}
+    chosen: dict[int, ChosenPose] = {}
+    for _ in range(ROUNDS if len(placeable) > 1 else 1):
+        for k in order:
+            candidates = list(rankings[(0, k)].clusters)
+            for j, placed in poses.items():
+                if j not in (0, k) and ((j, k) in rankings or (k, j) in rankings):
+                    candidates += [ScoredHypothesis(placed @ h.transform, h.source, h.score, h.object_score)
+                                   for h in relative(rankings, j, k)]
+            rescored = [ScoredHypothesis(c.transform, c.source, prior(c.source) + joint_score(
+                evidence, poses, k, c.transform, tolerance_floor), c.object_score) for c in candidates]
+            ranked = clusters_of(rescored, extent)
+            best = ranked[0]
+            margin = best.score - (ranked[1].score if len(ranked) > 1 else 0.0)
+            poses[k] = best.transform
+            chosen[k] = ChosenPose(best.transform, best.source, best.score, margin, 0.0)
+    return {k: ChosenPose(c.pose, c.source, c.score, c.margin, loop_residual(rankings, poses, k))
+            for k, c in chosen.items()}
+
+
+def loop_residual(rankings: Mapping[tuple[int, int], PairRanking], poses: Mapping[int, np.ndarray],
+                  view: int) -> float:
+    """The largest turn (deg) between ``view``'s chosen pose and what each other placed view's best hypothesis
+    for the pair says it is."""
+    residuals = [float(rotation_angle_deg((placed @ relative(rankings, j, view)[0].transform)[:3, :3],
+                                          poses[view][:3, :3]))
+                 for j, placed in poses.items() if j != view and ((j, view) in rankings or (view, j) in rankings)]
+    return max(residuals, default=0.0)
+

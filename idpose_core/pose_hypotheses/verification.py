@@ -1,0 +1,170 @@
+"""Poses of views with depth chosen among hypotheses from every source by one verifier.
+
+For every pair of views with object points: the sources propose (``sources``), local registration refines and
+the verifier scores (``pair``), and the views are placed jointly (``chain``). A view's pose is ``ambiguous`` when
+the runner-up from another cluster scores within ``ambiguity_margin``; a view without depth keeps its diffusion
+pose, and says so. No ROS here.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import small_gicp
+
+from idpose_core.depth_fusion.clouds import ObjectCloud, fused_cloud, view_cloud
+from idpose_core.depth_fusion.refinement import (
+    VOXEL_RANGE,
+    VOXEL_SHARE,
+    DepthRefinement,
+    ViewRefinement,
+    depth_seed,
+    pose_change,
+)
+from idpose_core.depth_fusion.registration import alignment_quality
+from idpose_core.depth_segmentation import DepthSegmentationError, Plane, backproject, object_centre, support_plane
+from idpose_core.metrics import rotation_angle_deg
+from idpose_core.pose_hypotheses.chain import choose_poses
+from idpose_core.pose_hypotheses.hypothesis import FAR_STAGES, Hypothesis, Source
+from idpose_core.pose_hypotheses.pair import PairRanking, prepare_pair, rank_pair
+from idpose_core.pose_hypotheses.sources import arm_hypothesis, gravity_hypotheses, registration_hypotheses
+from idpose_core.pose_hypotheses.verifier import ViewEvidence, view_evidence
+from idpose_core.view_input import ViewInput
+
+ALL_SOURCES = frozenset(Source)
+MOVED_DEG = 5.0  # the arm's pose is "beaten" when the winner is this far from it (deg) and leads by ``moved_margin``
+
+
+@dataclass(frozen=True)
+class VerificationSettings:
+    """Which ``sources`` propose poses (the diffusion's are always kept: they are what a view without depth
+    gets); ``ambiguity_margin``: a view whose best pose leads the runner-up of another cluster by less is
+    ambiguous; ``moved_margin``: by how much a pose far from the arm's must beat it for the object to count as
+    moved."""
+
+    sources: frozenset[Source] = ALL_SOURCES
+    ambiguity_margin: float = 0.15
+    moved_margin: float = 0.3
+
+
+@dataclass(frozen=True)
+class ViewData:
+    """One view's object points, evidence, object centre and support plane (None where it has none)."""
+
+    cloud: ObjectCloud | None
+    evidence: ViewEvidence | None
+    centre: np.ndarray | None
+    plane: Plane | None
+    note: str
+
+
+def view_data(view: ViewInput, mask: np.ndarray, extent: float | None) -> ViewData:
+    """What the verifier uses of a view: nothing, with a note, where its depth does not show the object."""
+    if view.depth is None or view.intrinsics is None:
+        return ViewData(None, None, None, None, "no depth: the diffusion pose")
+    if view.depth.shape != view.rgb.shape[:2]:
+        height, width = view.depth.shape[:2]
+        return ViewData(None, None, None, None, f"depth {width}x{height} does not match the image "
+                                                f"{view.rgb.shape[1]}x{view.rgb.shape[0]}: the diffusion pose")
+    cloud = view_cloud(view, mask)
+    if cloud is None:
+        return ViewData(None, None, None, None, "no depth on the object: the diffusion pose")
+    try:
+        centre = object_centre(view, mask)
+    except DepthSegmentationError as err:
+        return ViewData(None, None, None, None, f"no object centre ({err}): the diffusion pose")
+    points, valid = backproject(view.depth, view.intrinsics)
+    try:
+        plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(0))
+    except DepthSegmentationError:
+        plane = None
+    evidence = view_evidence(view.depth, view.intrinsics, view.rgb, mask, centre, extent or cloud.extent())
+    return ViewData(cloud, evidence, centre, plane, "")
+
+
+def pair_hypotheses(views: Sequence[ViewInput], data: Sequence[ViewData], seeds: np.ndarray, target: int,
+                    source: int, extent: float, settings: VerificationSettings) -> list[Hypothesis]:
+    """Every enabled source's proposals for view ``source`` in view ``target``'s frame; ``seeds`` (N, 2, 4, 4):
+    each view's diffusion answer and runner-up placed on its depth (NaN where it has none)."""
+    first, second = data[target], data[source]
+    hypotheses = []
+    for option in range(seeds.shape[1]):
+        relative = np.linalg.inv(seeds[target, option if target else 0]) @ seeds[source, option]
+        if np.all(np.isfinite(relative)):
+            hypotheses.append(Hypothesis(relative, Source.DIFFUSION, FAR_STAGES))
+    if Source.REGISTRATION in settings.sources:
+        hypotheses += registration_hypotheses(second.cloud.points, first.cloud.points, extent)
+    up_source, up_target = views[source].gravity_up, views[target].gravity_up
+    if Source.GRAVITY in settings.sources and up_source is not None and up_target is not None:
+        planes = (second.plane, first.plane) if second.plane is not None and first.plane is not None else None
+        hypotheses += gravity_hypotheses(second.cloud.points, first.cloud.points, up_source, up_target,
+                                         second.centre, first.centre, extent, planes)
+    pose_source, pose_target = views[source].camera_pose, views[target].camera_pose
+    if Source.ARM in settings.sources and pose_source is not None and pose_target is not None:
+        hypotheses.append(arm_hypothesis(np.asarray(pose_source, np.float64), np.asarray(pose_target, np.float64)))
+    return hypotheses
+
+
+def object_moved(ranking: PairRanking, settings: VerificationSettings) -> bool:
+    """Whether the arm's pose lost clearly on the object itself: the hypothesis the object's points agree with best
+    lies ``MOVED_DEG`` from the arm's and leads it there by ``moved_margin`` (the surroundings, still in place,
+    may well agree with the arm)."""
+    arm = ranking.best_of(Source.ARM)
+    if arm is None:
+        return False
+    on_object = max(ranking.clusters, key=lambda h: h.object_score)
+    far = float(rotation_angle_deg(arm.transform[:3, :3], on_object.transform[:3, :3])) > MOVED_DEG
+    return far and on_object.object_score - arm.object_score >= settings.moved_margin
+
+
+def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray,
+                      runner_up_poses: np.ndarray, cloud_voxel_size: float,
+                      settings: VerificationSettings = VerificationSettings()) -> DepthRefinement | None:
+    """Choose the poses (N, 4, 4, anchor's optical frame) of views with depth among every source's hypotheses;
+    ``poses`` and ``runner_up_poses`` are the diffusion's answers and runner-ups (NaN where none), which views
+    without depth keep. None when the anchor shows no object depth."""
+    poses = np.asarray(poses, dtype=np.float64)
+    anchor_cloud = view_cloud(views[0], masks[0]) if views[0].depth is not None else None
+    if anchor_cloud is None:
+        return None
+    extent = anchor_cloud.extent()
+    voxel = float(np.clip(VOXEL_SHARE * extent, *VOXEL_RANGE))
+    data = [view_data(view, mask, extent) for view, mask in zip(views, masks)]
+    if data[0].evidence is None:
+        return None
+    seeds = np.full((len(views), 2, 4, 4), math.nan)
+    for k, item in enumerate(data):
+        if item.centre is not None:
+            for option, diffusion in enumerate((poses[k], np.asarray(runner_up_poses[k], np.float64))):
+                if np.all(np.isfinite(diffusion)):
+                    seeds[k, option] = depth_seed(diffusion, data[0].centre, item.centre)
+    with_depth = [k for k, item in enumerate(data) if item.evidence is not None]
+    rankings = {}
+    for target in with_depth:
+        for source in with_depth:
+            if source > target:
+                hypotheses = pair_hypotheses(views, data, seeds, target, source, extent, settings)
+                pair = prepare_pair(data[source].cloud.points, data[target].cloud.points, voxel, extent)
+                rankings[(target, source)] = rank_pair(data[target].evidence, data[source].evidence, pair,
+                                                       hypotheses)
+    chosen = choose_poses([item.evidence for item in data], rankings, extent, voxel)
+    current = poses.copy()
+    reports = [ViewRefinement(False, "the anchor", math.nan, math.nan, 0.0, 0.0)]
+    anchor_tree = small_gicp.KdTree(small_gicp.PointCloud(data[0].cloud.points))
+    for k in range(1, len(views)):
+        if k not in chosen:
+            reports.append(ViewRefinement(False, data[k].note, math.nan, math.nan, 0.0, 0.0))
+            continue
+        pick = chosen[k]
+        current[k] = pick.pose
+        fitness, rmse = alignment_quality(data[k].cloud.points, anchor_tree, pick.pose, 2.0 * voxel)
+        rotation, translation = pose_change(pick.pose, poses[k])
+        ambiguous = pick.margin < settings.ambiguity_margin
+        note = f"runner-up within {pick.margin:.2f} of the best" if ambiguous else ""
+        reports.append(ViewRefinement(True, note, fitness, rmse, rotation, translation, pick.source.value,
+                                      pick.margin, ambiguous, object_moved(rankings[(0, k)], settings)))
+    kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and not reports[k].ambiguous)]
+    cloud = fused_cloud([data[k].cloud for k in kept], [current[k] for k in kept], cloud_voxel_size)
+    return DepthRefinement(poses=current, views=reports, cloud=cloud, voxel_size=voxel)
