@@ -18,6 +18,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import Marker
 
 from idpose_core.cameras import pinhole_camera_matrix
+from idpose_core.pose_hypotheses import VerificationSettings
 from idpose_core.synthetic.scenes import demo_objects
 from idpose_core.synthetic.tabletop import TabletopRenderer, challenge_camera, random_layout
 from idpose_ros.node.result_publisher import RESULT_QOS
@@ -75,8 +76,11 @@ def test_an_estimate_with_depth_publishes_the_object(harness, tabletop, wait_for
     assert result.object_axes == "anchor" and 0.05 < result.object_size.x < 0.25
     anchor, other = result.views
     assert (anchor.depth_refined, anchor.depth_note) == (False, "the anchor") and math.isnan(anchor.depth_fitness)
-    assert other.depth_refined or other.depth_note.startswith("depth registration rejected: ")
+    assert other.depth_refined, "depth_poses verify: the verifier chose the pose of a view with depth"
     assert 0.0 <= other.depth_fitness <= 1.0
+    assert other.pose_source in {"diffusion", "registration", "gravity"} and math.isfinite(other.verifier_margin)
+    assert other.ambiguous == (other.verifier_margin < VerificationSettings().ambiguity_margin)
+    assert not other.object_moved and anchor.pose_source == "diffusion" and math.isnan(anchor.verifier_margin)
     markers = wait_for(lambda: h.markers, "the markers")[-1].markers
     (box,) = [marker for marker in markers if marker.type == Marker.CUBE]
     assert box.pose == pose.pose and box.header == pose.header
