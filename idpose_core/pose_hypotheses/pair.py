@@ -7,14 +7,15 @@ from dataclasses import dataclass
 import numpy as np
 import small_gicp
 
-from idpose_core.pose_hypotheses.hypothesis import NEAR_STAGES, Hypothesis, ScoredHypothesis, Source, same_pose
+from idpose_core.pose_hypotheses.hypothesis import Hypothesis, ScoredHypothesis, Source, same_pose
 from idpose_core.pose_hypotheses.verifier import ViewEvidence, verify
 
 NEIGHBOURS = 10  # points for each GICP covariance
 ITERATIONS = 30  # per stage
 CLUSTER_DEG = 10.0  # hypotheses this close in rotation (and ``CLUSTER_SHARE`` of the extent in translation) are one
 CLUSTER_SHARE = 0.25
-POLISHED = 3  # the best clusters that get a polish (near matches only) after scoring
+POLISHED = 8  # the best clusters that get a polish on the object and its surroundings after scoring
+CONTEXT_STAGES = (0.05, 0.025)  # that polish's match distances (shares of the object's extent)
 # The arm's pose is a measurement, good to about a degree: it wins unless another pose scores this much better
 ARM_PRIOR = 0.3
 
@@ -94,14 +95,16 @@ def clusters_of(scored: Sequence[ScoredHypothesis], extent: float) -> list[Score
 def rank_pair(target: ViewEvidence, source: ViewEvidence, pair: PairClouds,
               hypotheses: Sequence[Hypothesis]) -> PairRanking:
     """Each of the ``hypotheses`` (source view in target view) registered locally as it asks, scored by the
-    verifier on both views, ranked per cluster; the ``POLISHED`` best
-    clusters are polished, and keep the polish where it scores higher. Needs at least one hypothesis."""
+    verifier on both views, ranked per cluster; the ``POLISHED`` best clusters are polished by registering the
+    object with its surroundings (the table patch and what stands near fix a slide the object alone leaves free),
+    and keep the polish where it scores higher. Needs at least one hypothesis."""
     def scored(transform: np.ndarray, origin) -> ScoredHypothesis:
         verdict = verify(target, source, transform, pair.voxel)
         return ScoredHypothesis(transform, origin, verdict.score + prior(origin), verdict.object.score)
 
     found = [scored(refine(pair, h.transform, h.stages), h.source) for h in hypotheses]
     clusters = clusters_of(found, pair.extent)
-    polished = [scored(refine(pair, h.transform, NEAR_STAGES), h.source) for h in clusters[:POLISHED]]
+    surroundings = prepare_pair(source.context.points, target.context.points, pair.voxel, pair.extent)
+    polished = [scored(refine(surroundings, h.transform, CONTEXT_STAGES), h.source) for h in clusters[:POLISHED]]
     better = [p if p.score > h.score else h for p, h in zip(polished, clusters[:POLISHED])]
     return PairRanking(clusters_of(better + clusters[POLISHED:], pair.extent), found + polished)

@@ -45,7 +45,7 @@ class VerificationSettings:
     moved."""
 
     sources: frozenset[Source] = ALL_SOURCES
-    ambiguity_margin: float = 0.15
+    ambiguity_margin: float = 0.5
     moved_margin: float = 0.3
 
 
