@@ -96,9 +96,9 @@ class PipelineResult:
     ``preprocessed`` masks are on the upright canvas of a de-rolled view);
     ``anchor_polar_deg`` and ``object_distance`` as used, with where each came from (``polar_source``:
     "gravity" or "parameter"; ``distance_source``: "depth" or "parameter"). ``runner_up_poses`` (N, 4, 4):
-    each view's runner-up (``SolverResult.runner_up_poses``) in the same frame, NaN for the anchor and for
-    views without one. ``depth``: the depth refinement and the fused cloud, ``object``: the cloud's pose and box
-    (both None without depth on the anchor, or with ``depth_refinement`` off). ``next_view``: the reachable camera
+    each view's runner-up (``SolverResult.runner_up_poses``; the verifier's where it chose the pose) in the same
+    frame, NaN for the anchor and for views without one. ``depth``: the depth refinement and the fused cloud,
+    ``object``: the cloud's pose and box (both None without depth on the anchor, or with ``depth_refinement`` off). ``next_view``: the reachable camera
     that best settles the views left ambiguous, or widens coverage (``suggest_next_view``)."""
 
     poses: np.ndarray
@@ -246,6 +246,9 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     if depth is not None:
         poses = depth.poses
         reports = [with_refinement(report, refinement) for report, refinement in zip(reports, depth.views)]
+        if depth.runner_up_poses is not None:  # the verifier's runner-up where it chose the pose
+            verified = np.array([math.isfinite(r.margin) for r in depth.views])
+            runners = np.where(verified[:, None, None], depth.runner_up_poses, runners)
     return PipelineResult(poses=poses, runner_up_poses=runners,
                           solver_result=solved, preprocessed=preprocessed, masks=masks, views=reports,
                           anchor_polar_deg=polar_deg,

@@ -17,6 +17,7 @@ from idpose_core.depth_fusion import view_cloud
 from idpose_core.depth_segmentation import object_centre
 from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses import Source, VerificationSettings, verify_with_depth
+from idpose_core.pose_hypotheses.hypothesis import same_pose
 from idpose_core.pose_hypotheses.sources import arm_hypothesis, gravity_hypotheses
 from idpose_core.pose_hypotheses.verifier import verify, view_evidence
 from idpose_core.synthetic.scenes import demo_objects
@@ -116,6 +117,8 @@ def test_from_a_wrong_diffusion_seed_the_verifier_finds_every_view(scene):
         report = result.views[k]
         assert report.refined and report.source in {"registration", "gravity"} and not report.ambiguous
         assert report.margin > 0 and not report.object_moved
+        runner = result.runner_up_poses[k]
+        assert np.isnan(runner).all() or not same_pose(runner, result.poses[k], 10.0, 0.02)
     assert result.views[0].note == "the anchor"
 
 

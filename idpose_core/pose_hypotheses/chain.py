@@ -8,6 +8,7 @@ says) measures how well the views agree.
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -24,13 +25,15 @@ ROUNDS = 2  # passes over the views: a later pass sees every view placed
 @dataclass(frozen=True)
 class ChosenPose:
     """One view's pose in the anchor's frame (``pose`` (4, 4)), the ``source`` of the hypothesis it came from, its
-    joint ``score``, its ``margin`` over the best candidate of another cluster, and the ``loop_residual_deg``: the
-    largest turn between the chosen pose and another placed view's best pair hypothesis for it (0 with two views)."""
+    joint ``score``, its ``margin`` over the best candidate of another cluster (``runner_up`` (4, 4), NaN where
+    there is none), and the ``loop_residual_deg``: the largest turn between the chosen pose and another placed
+    view's best pair hypothesis for it (0 with two views)."""
 
     pose: np.ndarray
     source: Source
     score: float
     margin: float
+    runner_up: np.ndarray
     loop_residual_deg: float
 
 
@@ -71,10 +74,10 @@ def choose_poses(evidence: Sequence[ViewEvidence | None], rankings: Mapping[tupl
             ranked = clusters_of(rescored, extent)
             best = ranked[0]
             margin = best.score - (ranked[1].score if len(ranked) > 1 else 0.0)
+            runner_up = ranked[1].transform if len(ranked) > 1 else np.full((4, 4), np.nan)
             poses[k] = best.transform
-            chosen[k] = ChosenPose(best.transform, best.source, best.score, margin, 0.0)
-    return {k: ChosenPose(c.pose, c.source, c.score, c.margin, loop_residual(rankings, poses, k))
-            for k, c in chosen.items()}
+            chosen[k] = ChosenPose(best.transform, best.source, best.score, margin, runner_up, 0.0)
+    return {k: dataclasses.replace(c, loop_residual_deg=loop_residual(rankings, poses, k)) for k, c in chosen.items()}
 
 
 def loop_residual(rankings: Mapping[tuple[int, int], PairRanking], poses: Mapping[int, np.ndarray],

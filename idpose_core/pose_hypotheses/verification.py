@@ -151,6 +151,7 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
                                                        hypotheses)
     chosen = choose_poses([item.evidence for item in data], rankings, extent, voxel)
     current = poses.copy()
+    runners = np.full_like(poses, math.nan)
     reports = [ViewRefinement(False, "the anchor", math.nan, math.nan, 0.0, 0.0)]
     anchor_tree = small_gicp.KdTree(small_gicp.PointCloud(data[0].cloud.points))
     for k in range(1, len(views)):
@@ -158,7 +159,7 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
             reports.append(ViewRefinement(False, data[k].note, math.nan, math.nan, 0.0, 0.0))
             continue
         pick = chosen[k]
-        current[k] = pick.pose
+        current[k], runners[k] = pick.pose, pick.runner_up
         fitness, rmse = alignment_quality(data[k].cloud.points, anchor_tree, pick.pose, 2.0 * voxel)
         rotation, translation = pose_change(pick.pose, poses[k])
         ambiguous = pick.margin < settings.ambiguity_margin
@@ -167,4 +168,4 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
                                       pick.margin, ambiguous, object_moved(rankings[(0, k)], settings)))
     kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and not reports[k].ambiguous)]
     cloud = fused_cloud([data[k].cloud for k in kept], [current[k] for k in kept], cloud_voxel_size)
-    return DepthRefinement(poses=current, views=reports, cloud=cloud, voxel_size=voxel)
+    return DepthRefinement(poses=current, views=reports, cloud=cloud, voxel_size=voxel, runner_up_poses=runners)
