@@ -98,8 +98,9 @@ class PipelineResult:
     "gravity" or "parameter"; ``distance_source``: "depth" or "parameter"). ``runner_up_poses`` (N, 4, 4):
     each view's runner-up (``SolverResult.runner_up_poses``; the verifier's where it chose the pose) in the same
     frame, NaN for the anchor and for views without one. ``depth``: the depth refinement and the fused cloud,
-    ``object``: the cloud's pose and box (both None without depth on the anchor, or with ``depth_refinement`` off). ``next_view``: the reachable camera
-    that best settles the views left ambiguous, or widens coverage (``suggest_next_view``)."""
+    ``object``: the cloud's pose and box (both None without depth on the anchor, or with ``depth_refinement``
+    off). ``next_view``: the reachable camera that best settles the views left ambiguous, or widens coverage
+    (``suggest_next_view``)."""
 
     poses: np.ndarray
     runner_up_poses: np.ndarray
