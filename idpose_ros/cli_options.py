@@ -86,7 +86,8 @@ def add_ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mask-topic", default=extras.mask_topic, help="object masks (mono8) from a segmentation node")
     group.add_argument("--gravity-topic", default=extras.gravity_topic,
                        help="sensor_msgs/Imu, or the optical frame's orientation in a z-up frame "
-                            "(PoseStamped or QuaternionStamped): each view's roll and elevation")
+                            "(PoseStamped or QuaternionStamped): each view's roll and elevation; a PoseStamped "
+                            "(the arm's camera pose) also proposes the poses between views with depth")
     group.add_argument("--imu-to-optical", type=float, nargs="+", default=extras.imu_to_optical, metavar="V",
                        help="rotation from the Imu frame to the optical frame: a quaternion X Y Z W or ROLL PITCH YAW "
                             "in radians, as the node's imu_to_optical (default: from the bag's transforms)")

@@ -32,8 +32,9 @@ from msg_adapters import (
 @dataclass(frozen=True)
 class ViewMessages:
     """One view as messages: its image and the depth, mask and CameraInfo that go with it (None where there is
-    none), world up in its optical frame (None without gravity), and where the node took them: its region of
-    interest and the Imu or orientation messages its gravity came from."""
+    none), world up in its optical frame (None without gravity), its optical frame in a fixed frame
+    (``camera_pose`` (4, 4), from the arm; None without), and where the node took them: its region of interest
+    and the Imu or orientation messages its gravity came from."""
 
     image: Image | CompressedImage
     depth: Image | None = None
@@ -42,6 +43,7 @@ class ViewMessages:
     gravity_up: np.ndarray | None = None
     roi: tuple[int, int, int, int] | None = None
     gravity_source: tuple[object, ...] = ()
+    camera_pose: np.ndarray | None = None
 
 
 def decode_image(message: Image | CompressedImage, max_pixels: int | None = None
@@ -102,9 +104,9 @@ def restamped(view: ViewMessages, stamp: Time, frame_id: str) -> ViewMessages:
 
 def decode_view(image: Image | CompressedImage, depth: Image | None = None, mask: Image | None = None,
                camera_info: CameraInfo | None = None, gravity_up: np.ndarray | None = None,
-               roi: tuple[int, int, int, int] | None = None) -> ViewInput:
+               roi: tuple[int, int, int, int] | None = None, camera_pose: np.ndarray | None = None) -> ViewInput:
     """Decode one view and its inputs (``with_inputs``)."""
-    return with_inputs(ViewInput(*decode_image(image)), depth, mask, camera_info, gravity_up, roi)
+    return with_inputs(ViewInput(*decode_image(image)), depth, mask, camera_info, gravity_up, roi, camera_pose)
 
 
 def encode_view(view: ViewInput, stamp: Time, frame_id: str) -> ViewMessages:
@@ -122,4 +124,4 @@ def encode_view(view: ViewInput, stamp: Time, frame_id: str) -> ViewMessages:
             if view.mask is not None else None)
     camera_info = (matrix_to_camera_info(view.intrinsics, width, height, header()) if view.intrinsics is not None
                    else None)
-    return ViewMessages(image, depth, mask, camera_info, view.gravity_up)
+    return ViewMessages(image, depth, mask, camera_info, view.gravity_up, camera_pose=view.camera_pose)

@@ -7,8 +7,10 @@ Topics: ``/camera/image_raw`` (sensor_msgs/Image: ``rgba8`` with alpha = object 
 camera_optical_frame and camera_link -> camera_imu_frame), ``/camera/imu`` (sensor_msgs/Imu at 200 Hz
 while the robot stands, in ``camera_imu_frame``, whose axes are camera_link's: not the optical frame's)
 and ``/camera/orientation`` (geometry_msgs/QuaternionStamped: the optical frame's orientation in
-``base_link``, whose +z is up). ``--scene tabletop`` adds ``/camera/depth/image_raw`` (aligned depth,
-``16UC1`` millimetres or ``32FC1`` metres) and ``/ground_truth/target_mask`` (``mono8``, the target's
+``base_link``, whose +z is up), ``/arm/camera_pose`` (geometry_msgs/PoseStamped: the optical frame in
+``world`` as an arm reports it, off by a kinematic and hand-eye error of ``ARM_ERROR`` per camera; as the
+gravity topic, it also gives the arm's pose hypotheses). ``--scene tabletop`` adds ``/camera/depth/image_raw``
+(aligned depth, ``16UC1`` millimetres or ``32FC1`` metres) and ``/ground_truth/target_mask`` (``mono8``, the target's
 true mask, for scoring segmentation). The robot stops at each view: /tf is sampled 0.1 s before and
 after each image, so looking the camera up at the image stamp interpolates.
 """
@@ -21,6 +23,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3
 from rclpy.serialization import serialize_message
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 from tqdm import tqdm
@@ -44,7 +47,8 @@ from msg_adapters import array_to_image, depth_to_image, matrix_to_camera_info, 
 
 WORLD, BASE, LINK, OPTICAL, IMU = "world", "base_link", "camera_link", "camera_optical_frame", "camera_imu_frame"
 IMAGE_TOPIC, INFO_TOPIC, POSE_TOPIC = "/camera/image_raw", "/camera/camera_info", "/camera/pose"
-IMU_TOPIC, ORIENTATION_TOPIC = "/camera/imu", "/camera/orientation"
+IMU_TOPIC, ORIENTATION_TOPIC, ARM_TOPIC = "/camera/imu", "/camera/orientation", "/arm/camera_pose"
+ARM_ERROR = ((0.5, 1.0), (0.002, 0.005))  # per camera: the arm's rotation (deg) and position (m) error, drawn in range
 DEPTH_TOPIC = "/camera/depth/image_raw"
 START_NS = 100 * 1_000_000_000  # first view at t = 100 s
 PERIOD_NS = 1_000_000_000  # one view per second
@@ -154,6 +158,17 @@ def write_pose(bag: BagWriter, topic: str, stamp: int, frame_id: str, transform:
     bag.write(topic, "geometry_msgs/msg/PoseStamped", stamp, serialize_message(message))
 
 
+def with_arm_error(pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``pose`` (4, 4) as an arm reports it: turned about a random axis and shifted in a random direction by
+    amounts drawn within ``ARM_ERROR``."""
+    axis, shift = rng.normal(size=3), rng.normal(size=3)
+    angle, distance = np.radians(rng.uniform(*ARM_ERROR[0])), rng.uniform(*ARM_ERROR[1])
+    reported = np.array(pose, dtype=np.float64)
+    reported[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() @ reported[:3, :3]
+    reported[:3, 3] += shift / np.linalg.norm(shift) * distance
+    return reported
+
+
 def write_imu(bag: BagWriter, stamp: int, world_from_imu: np.ndarray, rng: np.random.Generator) -> None:
     """Accelerometer samples at rest around ``stamp`` (the stop window): the floor's push, +g up, plus noise."""
     rotation = world_from_imu[:3, :3]
@@ -215,7 +230,7 @@ def make_bag(out: Path, options: SyntheticBagOptions = SyntheticBagOptions()) ->
     size = size or (256 if scene == "plain" else TABLETOP_SIZE)
     world_from_optical = rolled_optical_frames(spheres, rolls)
     frames = render_frames(scene, spec, world_from_optical, spheres, rolls, size, rng, options.light)
-    noise = np.random.default_rng([seed, 1])
+    noise, arm = np.random.default_rng([seed, 1]), np.random.default_rng([seed, 2])
     with BagWriter(out, storage) as bag:
         write_tf(bag, START_NS - STOP_NS, [(LINK, OPTICAL, LINK_FROM_OPTICAL), (LINK, IMU, LINK_FROM_IMU)],
                  static=True)
@@ -236,4 +251,5 @@ def make_bag(out: Path, options: SyntheticBagOptions = SyntheticBagOptions()) ->
                             array_to_image(np.where(frame.target_mask, 255, 0).astype(np.uint8), "mono8"))
             write_camera_info(bag, INFO_TOPIC, stamp, OPTICAL, size, FOV_DEG)
             write_pose(bag, POSE_TOPIC, stamp, WORLD, world_from_optical[index])
+            write_pose(bag, ARM_TOPIC, stamp, WORLD, with_arm_error(world_from_optical[index], arm))
     return out

@@ -68,8 +68,9 @@ class ExtraTopics:
     before the image, turned into the optical frame by ``imu_to_optical`` (a quaternion x y z w or roll
     pitch yaw in radians, as the node's parameter takes it) or else by the bag's transforms from the
     Imu's frame to the image's) or the camera's orientation in a frame whose
-    +z is up (geometry_msgs/PoseStamped or QuaternionStamped). A view that lacks a requested input is
-    skipped, with the reason.
+    +z is up (geometry_msgs/PoseStamped or QuaternionStamped); a PoseStamped also gives the camera's pose in
+    that frame, as the node's ``camera_pose`` topic does (the arm's pose hypotheses). A view that lacks a
+    requested input is skipped, with the reason.
     """
 
     depth_topic: str | None = None
@@ -90,10 +91,12 @@ class ExtraTopics:
 @dataclass(frozen=True)
 class ViewSources:
     """Where one view's other inputs are: per kind (depth, mask, camera_info) the index of the matched message
-    on its topic, and world up in the view's optical frame when a gravity topic was given."""
+    on its topic, world up in the view's optical frame when a gravity topic was given, and the camera's optical
+    frame in the fixed frame (4, 4) when that topic is a PoseStamped (the arm's camera pose)."""
 
     messages: dict[str, int] = field(default_factory=dict)
     gravity_up: np.ndarray | None = None
+    camera_pose: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -199,11 +202,12 @@ def _read(reader, topic: str, types: dict[str, type]) -> Iterator[tuple[int, obj
 
 
 def _gravity(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: TransformBuffer
-             ) -> tuple[dict[int, np.ndarray], dict[int, str]]:
-    """World up in each view's optical frame from ``extras.gravity_topic``, or why a view has none."""
+             ) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], dict[int, str]]:
+    """World up in each view's optical frame from ``extras.gravity_topic``, the camera's pose where that topic is
+    a PoseStamped, or why a view has none."""
     readings = list(_read(reader, extras.gravity_topic, GRAVITY_TYPES))
     tolerance, window = int(round(extras.tolerance * 1e9)), int(round(extras.imu_window * 1e9))
-    ups, missing = {}, {}
+    ups, poses, missing = {}, {}, {}
     if readings and isinstance(readings[0][1], Imu):
         stamps = np.array([stamp for stamp, _ in readings])
         try:
@@ -221,7 +225,7 @@ def _gravity(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: Transfo
                 ups[view.view_id] = up_from_acceleration(a, optical_from_imu)
             except (GravityUnavailable, TransformLookupError) as err:
                 missing[view.view_id] = f"no gravity: {err}"
-        return ups, missing
+        return ups, poses, missing
     matches = match_stamps([view.stamp for view in views], [stamp for stamp, _ in readings], tolerance)
     for view, index in zip(views, matches):
         if index < 0:
@@ -232,7 +236,10 @@ def _gravity(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: Transfo
             ups[view.view_id] = up_from_orientation(orientation_rotation(readings[index][1]))
         except AdapterError as err:
             missing[view.view_id] = f"no gravity: {err}"
-    return ups, missing
+            continue
+        if isinstance(readings[index][1], PoseStamped):
+            poses[view.view_id] = pose_to_matrix(readings[index][1].pose)
+    return ups, poses, missing
 
 
 def _sources(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: TransformBuffer
@@ -251,12 +258,12 @@ def _sources(reader, views: list[ViewInfo], extras: ExtraTopics, buffer: Transfo
                 missing.setdefault(view.view_id, f"no {kind}: nothing on {topic} within {extras.tolerance:g} s of "
                                                  f"the image stamp {view.stamp * 1e-9:.3f} s")
             matched[view.view_id][kind] = int(index)
-    ups = {}
+    ups, poses = {}, {}
     if extras.gravity_topic:
-        ups, no_gravity = _gravity(reader, views, extras, buffer)
+        ups, poses, no_gravity = _gravity(reader, views, extras, buffer)
         for view_id, reason in no_gravity.items():
             missing.setdefault(view_id, reason)
-    return {view_id: ViewSources(kinds, ups.get(view_id)) for view_id, kinds in matched.items()
+    return {view_id: ViewSources(kinds, ups.get(view_id), poses.get(view_id)) for view_id, kinds in matched.items()
             if view_id not in missing}, missing
 
 
@@ -300,7 +307,8 @@ def _read_view_messages(path: str | Path, image_topic: str, view_ids: set[int], 
         for view_id, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
             if view_id in view_ids:
                 messages[view_id] = ViewMessages(deserialize_message(raw, IMAGE_TYPES[connection.msgtype]),
-                                                 gravity_up=bag.extras[view_id].gravity_up)
+                                                 gravity_up=bag.extras[view_id].gravity_up,
+                                                 camera_pose=bag.extras[view_id].camera_pose)
         for kind, topic in extras.topics.items():
             if kind not in wanted:
                 continue
@@ -321,7 +329,8 @@ def load_views(path: str | Path, image_topic: str, view_ids: set[int], bag: BagV
     views, problems = {}, {}
     for view_id, view in _read_view_messages(path, image_topic, view_ids, bag, extras).items():
         try:
-            decoded = decode_view(view.image, view.depth, view.mask, view.camera_info, view.gravity_up)
+            decoded = decode_view(view.image, view.depth, view.mask, view.camera_info, view.gravity_up,
+                                  camera_pose=view.camera_pose)
             views[view_id] = MessageView(**{f.name: getattr(decoded, f.name) for f in fields(ViewInput)},
                                          messages=view)
         except AdapterError as err:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
-from geometry_msgs.msg import QuaternionStamped
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.logging import LoggingSeverity, set_logger_level
@@ -100,7 +100,8 @@ class ReplayEstimator:
         self._executor.add_node(self._client)
         self._inputs = {kind: self._client.create_publisher(kind_type, f"{namespace}/{kind}", 10)
                         for kind, kind_type in (("depth", Image), ("mask", Image), ("camera_info", CameraInfo),
-                                                ("camera_orientation", QuaternionStamped))}
+                                                ("camera_orientation", QuaternionStamped),
+                                                ("camera_pose", PoseStamped))}
         self._action = ActionClient(self._client, EstimatePoses, f"{self.node_name}/estimate_poses",
                                     goal_service_qos_profile=SERVICE_QOS, result_service_qos_profile=SERVICE_QOS,
                                     cancel_service_qos_profile=SERVICE_QOS)
@@ -135,11 +136,14 @@ class ReplayEstimator:
 
     # ----- inputs and goals ----------------------------------------------------------------------------------------
     def _publish_inputs(self, view: ViewMessages) -> bool:
-        """Publish the view's other inputs on the node's topics (gravity as the optical frame's orientation in a
-        z-up frame), stamped as its image; True when there were any."""
+        """Publish the view's other inputs on the node's topics (the arm's camera pose where the view has one, else
+        gravity as the optical frame's orientation in a z-up frame), stamped as its image; True when there were
+        any."""
         stamp = view.image.header.stamp
         sent: dict[str, Any] = {"depth": view.depth, "mask": view.mask, "camera_info": view.camera_info}
-        if view.gravity_up is not None:
+        if view.camera_pose is not None:
+            sent["camera_pose"] = PoseStamped(header=Header(stamp=stamp), pose=matrix_to_pose(view.camera_pose))
+        elif view.gravity_up is not None:
             orientation = matrix_to_pose(np.block([[level_from_optical(view.gravity_up), np.zeros((3, 1))],
                                                    [np.zeros((1, 3)), np.ones((1, 1))]])).orientation
             sent["camera_orientation"] = QuaternionStamped(header=Header(stamp=stamp), quaternion=orientation)
