@@ -45,12 +45,13 @@ def depth_fields(refinement: ViewRefinement | None) -> dict[str, Any]:
     if refinement is None:
         return {"depth_refined": False, "depth_note": "", "depth_fitness": math.nan, "depth_inlier_rmse": math.nan,
                 "depth_rotation_change_deg": 0.0, "depth_translation_change": 0.0, "pose_source": "diffusion",
-                "verifier_margin": math.nan, "object_moved": False}
+                "verifier_margin": math.nan, "object_moved": False, "loop_residual_deg": math.nan}
     return {"depth_refined": refinement.refined, "depth_note": refinement.note,
             "depth_fitness": refinement.fitness, "depth_inlier_rmse": refinement.inlier_rmse,
             "depth_rotation_change_deg": refinement.rotation_change_deg,
             "depth_translation_change": refinement.translation_change, "pose_source": refinement.source,
-            "verifier_margin": refinement.margin, "object_moved": refinement.object_moved}
+            "verifier_margin": refinement.margin, "object_moved": refinement.object_moved,
+            "loop_residual_deg": refinement.loop_residual_deg}
 
 
 def refinement_of(view: ViewEstimate) -> ViewRefinement | None:
@@ -61,7 +62,8 @@ def refinement_of(view: ViewEstimate) -> ViewRefinement | None:
     return ViewRefinement(view.depth_refined, view.depth_note, float(view.depth_fitness),
                           float(view.depth_inlier_rmse), float(view.depth_rotation_change_deg),
                           float(view.depth_translation_change), view.pose_source or "diffusion", margin,
-                          bool(view.ambiguous) if math.isfinite(margin) else False, view.object_moved)
+                          bool(view.ambiguous) if math.isfinite(margin) else False, view.object_moved,
+                          float(view.loop_residual_deg))
 
 
 def view_ambiguous(view: ViewReport, solver_ambiguous: bool) -> bool:

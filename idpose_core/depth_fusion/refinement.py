@@ -50,8 +50,9 @@ class ViewRefinement:
     Where the pose hypotheses and their verifier chose the pose (``idpose_core.pose_hypotheses``): ``source``, the
     winner's (``diffusion``, ``registration``, ``gravity``, ``arm``; ``diffusion`` too for a view the refinement
     only seeded from it), the verifier's ``margin`` over the runner-up from another cluster (NaN where no verifier
-    ran), ``ambiguous`` when that margin is too small to tell them apart, and ``object_moved`` when the arm's pose
-    lost clearly to another: the object likely moved between the views."""
+    ran), ``ambiguous`` when that margin is too small to tell them apart (or the views disagree: a pose graph's
+    ``loop_residual_deg`` over its bound, NaN with two views or no verifier), and ``object_moved`` when the arm's
+    pose lost clearly to another: the object likely moved between the views."""
 
     refined: bool
     note: str
@@ -63,6 +64,7 @@ class ViewRefinement:
     margin: float = math.nan
     ambiguous: bool = False
     object_moved: bool = False
+    loop_residual_deg: float = math.nan
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,8 @@
 A wide pair (little overlap) is settled through a view between: view k's candidates are its own pair's with the
 anchor, and every other view's chosen pose composed with the hypotheses of that view's pair with k. Each
 candidate is scored against every view already placed, and the best wins; the runner-up is the best candidate of
-another cluster. The loop residual (how far the chosen pose is from what each placed view's best pair hypothesis
-says) measures how well the views agree.
+another cluster. With more than two views, every pair that agrees with the placement then enters a pose graph
+(``pose_graph``), whose fit sets the poses and whose loop-closure residual measures how well the views agree.
 """
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses.hypothesis import ScoredHypothesis, Source
 from idpose_core.pose_hypotheses.pair import PairRanking, clusters_of, prior
+from idpose_core.pose_hypotheses.pose_graph import agreeing_edges, optimise
 from idpose_core.pose_hypotheses.verifier import ViewEvidence, verify
 
 ROUNDS = 2  # passes over the views: a later pass sees every view placed
@@ -26,8 +26,8 @@ ROUNDS = 2  # passes over the views: a later pass sees every view placed
 class ChosenPose:
     """One view's pose in the anchor's frame (``pose`` (4, 4)), the ``source`` of the hypothesis it came from, its
     joint ``score``, its ``margin`` over the best candidate of another cluster (``runner_up`` (4, 4), NaN where
-    there is none), and the ``loop_residual_deg``: the largest turn between the chosen pose and another placed
-    view's best pair hypothesis for it (0 with two views)."""
+    there is none), and the ``loop_residual_deg``: the largest rotation residual (deg) of the pose graph's edges
+    at this view (0 with two views)."""
 
     pose: np.ndarray
     source: Source
@@ -77,15 +77,7 @@ def choose_poses(evidence: Sequence[ViewEvidence | None], rankings: Mapping[tupl
             runner_up = ranked[1].transform if len(ranked) > 1 else np.full((4, 4), np.nan)
             poses[k] = best.transform
             chosen[k] = ChosenPose(best.transform, best.source, best.score, margin, runner_up, 0.0)
-    return {k: dataclasses.replace(c, loop_residual_deg=loop_residual(rankings, poses, k)) for k, c in chosen.items()}
-
-
-def loop_residual(rankings: Mapping[tuple[int, int], PairRanking], poses: Mapping[int, np.ndarray],
-                  view: int) -> float:
-    """The largest turn (deg) between ``view``'s chosen pose and what each other placed view's best hypothesis
-    for the pair says it is."""
-    residuals = [float(rotation_angle_deg((placed @ relative(rankings, j, view)[0].transform)[:3, :3],
-                                          poses[view][:3, :3]))
-                 for j, placed in poses.items() if j != view and ((j, view) in rankings or (view, j) in rankings)]
-    return max(residuals, default=0.0)
-
+    if len(chosen) < 2:
+        return chosen
+    fitted, loops = optimise(poses, agreeing_edges(rankings, poses), extent)
+    return {k: dataclasses.replace(c, pose=fitted[k], loop_residual_deg=loops[k]) for k, c in chosen.items()}

@@ -41,11 +41,13 @@ MOVED_DEG = 5.0  # the arm's pose is "beaten" when the winner is this far from i
 class VerificationSettings:
     """Which ``sources`` propose poses (the diffusion's are always kept: they are what a view without depth
     gets); ``ambiguity_margin``: a view whose best pose leads the runner-up of another cluster by less is
-    ambiguous; ``moved_margin``: by how much a pose far from the arm's must beat it for the object to count as
+    ambiguous, and so is one whose pose-graph loop residual exceeds ``max_loop_residual_deg`` (the views
+    disagree); ``moved_margin``: by how much a pose far from the arm's must beat it for the object to count as
     moved."""
 
     sources: frozenset[Source] = ALL_SOURCES
     ambiguity_margin: float = 0.5
+    max_loop_residual_deg: float = 10.0
     moved_margin: float = 0.3
 
 
@@ -162,10 +164,12 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
         current[k], runners[k] = pick.pose, pick.runner_up
         fitness, rmse = alignment_quality(data[k].cloud.points, anchor_tree, pick.pose, 2.0 * voxel)
         rotation, translation = pose_change(pick.pose, poses[k])
-        ambiguous = pick.margin < settings.ambiguity_margin
-        note = f"runner-up within {pick.margin:.2f} of the best" if ambiguous else ""
+        loop = pick.loop_residual_deg if len(chosen) > 1 else math.nan
+        ambiguous = pick.margin < settings.ambiguity_margin or loop > settings.max_loop_residual_deg
+        note = ("" if not ambiguous else f"runner-up within {pick.margin:.2f} of the best"
+                if pick.margin < settings.ambiguity_margin else f"the views disagree by {loop:.0f} deg")
         reports.append(ViewRefinement(True, note, fitness, rmse, rotation, translation, pick.source.value,
-                                      pick.margin, ambiguous, object_moved(rankings[(0, k)], settings)))
+                                      pick.margin, ambiguous, object_moved(rankings[(0, k)], settings), loop))
     kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and not reports[k].ambiguous)]
     cloud = fused_cloud([data[k].cloud for k in kept], [current[k] for k in kept], cloud_voxel_size)
     return DepthRefinement(poses=current, views=reports, cloud=cloud, voxel_size=voxel, runner_up_poses=runners)
