@@ -48,6 +48,7 @@ from idpose_core.pipeline import PipelineSettings, estimate_view_poses, with_ref
 from idpose_core.pose_hypotheses import Source, VerificationSettings, verify_with_depth  # noqa: E402
 from idpose_core.solver import SolverConfig  # noqa: E402
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
+from idpose_core.synthetic.robot_views import with_arm_error  # noqa: E402
 from idpose_core.synthetic.tabletop import (  # noqa: E402
     TabletopRenderer,
     challenge_camera,
@@ -62,7 +63,6 @@ BINS = ((10.0, 45.0), (45.0, 90.0), (90.0, 135.0), (135.0, 160.0))  # deg betwee
 SIZES = {"8 cm": (0.04, (0.25, 0.35), True), "20 cm": (0.1, (0.45, 0.65), True), "60 cm": (0.3, (0.9, 1.2), True)}
 POLAR_DEG = (50.0, 85.0)  # the cameras' polar angles (deg from up)
 NEIGHBOUR_DEG = (30.0, 60.0)  # n = 4: azimuth steps between neighbours
-ARM_ERROR = ((0.5, 1.0), (0.002, 0.005))  # per camera: rotation (deg) and position (m) error of the arm's pose
 MOVED_DEG = (30.0, 90.0)  # the object's turn between views in the moved case
 IMAGE_SIZE, FOV = 320, 60.0
 SOURCES = {"diffusion + verifier": frozenset(), "registration": frozenset({Source.REGISTRATION}),
@@ -94,17 +94,6 @@ def chain_spheres(rng: np.random.Generator, count: int, distances: tuple[float, 
     azimuths = rng.uniform(0.0, 2.0 * math.pi) + np.cumsum([0.0, *np.radians(rng.uniform(*NEIGHBOUR_DEG,
                                                                                          count - 1))])
     return np.stack([eye(math.radians(rng.uniform(*POLAR_DEG)), a, rng.uniform(*distances)) for a in azimuths])
-
-
-def arm_poses(cameras: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """The cameras (N, 4, 4) as an arm reports them: each turned and shifted by a random ``ARM_ERROR``."""
-    noisy = cameras.copy()
-    for pose in noisy:
-        axis, shift = rng.normal(size=3), rng.normal(size=3)
-        angle, distance = math.radians(rng.uniform(*ARM_ERROR[0])), rng.uniform(*ARM_ERROR[1])
-        pose[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() @ pose[:3, :3]
-        pose[:3, 3] += shift / np.linalg.norm(shift) * distance
-    return noisy
 
 
 def render(spec, spheres: np.ndarray, radius: float, table: bool, rng: np.random.Generator, moved_deg: float = 0.0):
@@ -139,7 +128,7 @@ def measure(predictor, preset: str, spec, case: dict, rng: np.random.Generator) 
         turn = np.eye(4)
         turn[:3, :3] = Rotation.from_euler("z", -moved, degrees=True).as_matrix()
         truth[-1] = np.linalg.inv(cameras[0]) @ turn @ cameras[-1]
-    arm = arm_poses(cameras, rng)
+    arm = [with_arm_error(camera, rng) for camera in cameras]
     depths = [frame.depth if case["depth"] == "exact" else stereo_depth(frame.depth, rng) for frame in frames]
     ups = [camera[:3, :3].T @ [0.0, 0.0, 1.0] for camera in cameras]
     views = [ViewInput(rgb=f.rgb, depth=d, intrinsics=intrinsics, gravity_up=up, camera_pose=pose)

@@ -8,7 +8,7 @@ camera_optical_frame and camera_link -> camera_imu_frame), ``/camera/imu`` (sens
 while the robot stands, in ``camera_imu_frame``, whose axes are camera_link's: not the optical frame's)
 and ``/camera/orientation`` (geometry_msgs/QuaternionStamped: the optical frame's orientation in
 ``base_link``, whose +z is up), ``/arm/camera_pose`` (geometry_msgs/PoseStamped: the optical frame in
-``world`` as an arm reports it, off by a kinematic and hand-eye error of ``ARM_ERROR`` per camera; as the
+``world`` as an arm reports it, off by a kinematic and hand-eye error per camera (``with_arm_error``); as the
 gravity topic, it also gives the arm's pose hypotheses). ``--scene tabletop`` adds ``/camera/depth/image_raw``
 (aligned depth, ``16UC1`` millimetres or ``32FC1`` metres) and ``/ground_truth/target_mask`` (``mono8``, the target's
 true mask, for scoring segmentation). The robot stops at each view: /tf is sampled 0.1 s before and
@@ -23,13 +23,12 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3
 from rclpy.serialization import serialize_message
-from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 from tqdm import tqdm
 
 from idpose_core.synthetic.catalogue import HELDOUT_BLOBS, heldout_objects
-from idpose_core.synthetic.robot_views import LINK_FROM_OPTICAL, pinhole_intrinsics, robot_chain
+from idpose_core.synthetic.robot_views import LINK_FROM_OPTICAL, pinhole_intrinsics, robot_chain, with_arm_error
 from idpose_core.synthetic.scenes import (
     FOV_DEG,
     ObjectSpec,
@@ -48,7 +47,6 @@ from msg_adapters import array_to_image, depth_to_image, matrix_to_camera_info, 
 WORLD, BASE, LINK, OPTICAL, IMU = "world", "base_link", "camera_link", "camera_optical_frame", "camera_imu_frame"
 IMAGE_TOPIC, INFO_TOPIC, POSE_TOPIC = "/camera/image_raw", "/camera/camera_info", "/camera/pose"
 IMU_TOPIC, ORIENTATION_TOPIC, ARM_TOPIC = "/camera/imu", "/camera/orientation", "/arm/camera_pose"
-ARM_ERROR = ((0.5, 1.0), (0.002, 0.005))  # per camera: the arm's rotation (deg) and position (m) error, drawn in range
 DEPTH_TOPIC = "/camera/depth/image_raw"
 START_NS = 100 * 1_000_000_000  # first view at t = 100 s
 PERIOD_NS = 1_000_000_000  # one view per second
@@ -156,17 +154,6 @@ def write_pose(bag: BagWriter, topic: str, stamp: int, frame_id: str, transform:
     """A geometry_msgs/PoseStamped of ``transform`` (4, 4) in ``frame_id``."""
     message = PoseStamped(header=Header(frame_id=frame_id, stamp=ros_time(stamp)), pose=matrix_to_pose(transform))
     bag.write(topic, "geometry_msgs/msg/PoseStamped", stamp, serialize_message(message))
-
-
-def with_arm_error(pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """``pose`` (4, 4) as an arm reports it: turned about a random axis and shifted in a random direction by
-    amounts drawn within ``ARM_ERROR``."""
-    axis, shift = rng.normal(size=3), rng.normal(size=3)
-    angle, distance = np.radians(rng.uniform(*ARM_ERROR[0])), rng.uniform(*ARM_ERROR[1])
-    reported = np.array(pose, dtype=np.float64)
-    reported[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() @ reported[:3, :3]
-    reported[:3, 3] += shift / np.linalg.norm(shift) * distance
-    return reported
 
 
 def write_imu(bag: BagWriter, stamp: int, world_from_imu: np.ndarray, rng: np.random.Generator) -> None:
