@@ -18,11 +18,12 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import Marker
 
 from idpose_core.cameras import pinhole_camera_matrix
+from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses import VerificationSettings
 from idpose_core.synthetic.scenes import demo_objects
 from idpose_core.synthetic.tabletop import TabletopRenderer, challenge_camera, random_layout
 from idpose_ros.node.result_publisher import RESULT_QOS
-from msg_adapters import array_to_image, cloud_to_points, matrix_to_camera_info, pose_to_matrix
+from msg_adapters import array_to_image, cloud_to_points, matrix_to_camera_info, matrix_to_pose, pose_to_matrix
 
 pytestmark = pytest.mark.slow  # starts a node
 
@@ -84,3 +85,34 @@ def test_an_estimate_with_depth_publishes_the_object(harness, tabletop, wait_for
     markers = wait_for(lambda: h.markers, "the markers")[-1].markers
     (box,) = [marker for marker in markers if marker.type == Marker.CUBE]
     assert box.pose == pose.pose and box.header == pose.header
+
+
+def test_the_arms_camera_pose_poses_a_view_with_depth(harness, tabletop, wait_for):
+    """Each view's camera_pose (its optical frame in the world, z up) gives the node gravity and the arm's pose
+    hypothesis: the verified pose of the second view is the camera's true pose, whatever the random model says."""
+    frames, cameras = tabletop
+    h = harness(capture_mode="on_request")
+    depth = h.probe.create_publisher(Image, "depth", 10)
+    info = h.probe.create_publisher(CameraInfo, "camera_info", 10)
+    arm = h.probe.create_publisher(PoseStamped, "camera_pose", 10)
+    wait_for(lambda: depth.get_subscription_count() and info.get_subscription_count() and arm.get_subscription_count(),
+             "the input subscriptions")
+    info.publish(matrix_to_camera_info(pinhole_camera_matrix(SIZE, SIZE, FOV), SIZE, SIZE, header("cam", 1)))
+    for k, (frame, camera) in enumerate(zip(frames, cameras)):
+        stamp = header("cam", 10 + k)
+        arm.publish(PoseStamped(header=stamp, pose=matrix_to_pose(camera)))
+        depth.publish(array_to_image(frame.depth, "32FC1", stamp))
+        before = h.node.status().images_received
+        h.send(array_to_image(frame.rgb, "rgb8", stamp))
+        wait_for(lambda before=before: h.node.status().images_received == before + 1, "the image")
+        assert h.call("capture").success
+    wait_for(lambda: all(view.input.depth is not None and view.input.camera_pose is not None
+                         for view in h.node._buffer.snapshot()), "both views' depth and camera pose")
+
+    status, result = ActionProbe(h).run()
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.error_message
+    other = result.views[1]
+    truth = np.linalg.inv(cameras[0]) @ cameras[1]
+    turn = rotation_angle_deg(pose_to_matrix(other.pose)[:3, :3], truth[:3, :3])
+    assert other.depth_refined and other.polar_source == "gravity" and turn < 2.0
+    assert not other.object_moved and math.isfinite(other.verifier_margin)
