@@ -72,10 +72,6 @@ SOURCES = {"diffusion + verifier": frozenset(), "registration": frozenset({Sourc
 NO_GRAVITY = {"all, no gravity"}
 
 
-def eye(polar: float, azimuth: float, radius: float) -> np.ndarray:
-    return np.array([polar, azimuth, radius])
-
-
 def pair_spheres(rng: np.random.Generator, low: float, high: float, distances: tuple[float, float]) -> np.ndarray:
     """Two cameras (2, 3) = (polar, azimuth, radius) whose viewing directions are ``low``-``high`` deg apart."""
     while True:
@@ -85,15 +81,15 @@ def pair_spheres(rng: np.random.Generator, low: float, high: float, distances: t
         if abs(cosine) <= 1.0:
             azimuth = rng.uniform(0.0, 2.0 * math.pi)
             turn = math.acos(cosine) * rng.choice([-1.0, 1.0])
-            return np.stack([eye(first, azimuth, rng.uniform(*distances)),
-                             eye(second, azimuth + turn, rng.uniform(*distances))])
+            return np.array([[first, azimuth, rng.uniform(*distances)],
+                             [second, azimuth + turn, rng.uniform(*distances)]])
 
 
 def chain_spheres(rng: np.random.Generator, count: int, distances: tuple[float, float]) -> np.ndarray:
     """``count`` cameras going round the object, neighbours ``NEIGHBOUR_DEG`` apart in azimuth."""
     azimuths = rng.uniform(0.0, 2.0 * math.pi) + np.cumsum([0.0, *np.radians(rng.uniform(*NEIGHBOUR_DEG,
                                                                                          count - 1))])
-    return np.stack([eye(math.radians(rng.uniform(*POLAR_DEG)), a, rng.uniform(*distances)) for a in azimuths])
+    return np.array([[math.radians(rng.uniform(*POLAR_DEG)), a, rng.uniform(*distances)] for a in azimuths])
 
 
 def render(spec, spheres: np.ndarray, radius: float, table: bool, rng: np.random.Generator, moved_deg: float = 0.0):

@@ -248,8 +248,7 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
         poses = depth.poses
         reports = [with_refinement(report, refinement) for report, refinement in zip(reports, depth.views)]
         if depth.runner_up_poses is not None:  # the verifier's runner-up where it chose the pose
-            verified = np.array([math.isfinite(r.margin) for r in depth.views])
-            runners = np.where(verified[:, None, None], depth.runner_up_poses, runners)
+            runners = depth.runner_up_poses
     return PipelineResult(poses=poses, runner_up_poses=runners,
                           solver_result=solved, preprocessed=preprocessed, masks=masks, views=reports,
                           anchor_polar_deg=polar_deg,

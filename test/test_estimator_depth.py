@@ -42,6 +42,28 @@ def tabletop():
     return frames, cameras
 
 
+def capture_with_depth(h, wait_for, frames, images: list[Image], arm_poses=None) -> None:
+    """Publish the intrinsics, then per frame its depth (and, given ``arm_poses``, its optical frame in the world on
+    camera_pose) and its image, stamped alike, and capture it; return once every view has its depth."""
+    depth = h.probe.create_publisher(Image, "depth", 10)
+    info = h.probe.create_publisher(CameraInfo, "camera_info", 10)
+    arm = h.probe.create_publisher(PoseStamped, "camera_pose", 10)
+    wait_for(lambda: depth.get_subscription_count() and info.get_subscription_count() and arm.get_subscription_count(),
+             "the input subscriptions")
+    info.publish(matrix_to_camera_info(pinhole_camera_matrix(SIZE, SIZE, FOV), SIZE, SIZE, header("cam", 1)))
+    for k, (frame, image) in enumerate(zip(frames, images)):
+        stamp = header("cam", 10 + k)
+        if arm_poses is not None:
+            arm.publish(PoseStamped(header=stamp, pose=matrix_to_pose(arm_poses[k])))
+        depth.publish(array_to_image(frame.depth, "32FC1", stamp))
+        image.header = stamp
+        before = h.node.status().images_received
+        h.send(image)
+        wait_for(lambda before=before: h.node.status().images_received == before + 1, "the image")
+        assert h.call("capture").success
+    wait_for(lambda: all(view.input.depth is not None for view in h.node._buffer.snapshot()), "every depth image")
+
+
 def test_an_estimate_with_depth_publishes_the_object(harness, tabletop, wait_for):
     frames, cameras = tabletop
     h = harness(capture_mode="on_request")
@@ -49,19 +71,8 @@ def test_an_estimate_with_depth_publishes_the_object(harness, tabletop, wait_for
     poses: list[PoseStamped] = []
     h.probe.create_subscription(PointCloud2, "idpose_estimator/object_cloud", clouds.append, RESULT_QOS)
     h.probe.create_subscription(PoseStamped, "idpose_estimator/object_pose", poses.append, RESULT_QOS)
-    depth = h.probe.create_publisher(Image, "depth", 10)
-    info = h.probe.create_publisher(CameraInfo, "camera_info", 10)
-    wait_for(lambda: depth.get_subscription_count() and info.get_subscription_count(), "the input subscriptions")
-    info.publish(matrix_to_camera_info(pinhole_camera_matrix(SIZE, SIZE, FOV), SIZE, SIZE, header("cam", 1)))
-    for k, frame in enumerate(frames):
-        stamp = header("cam", 10 + k)
-        depth.publish(array_to_image(frame.depth, "32FC1", stamp))
-        alpha = (frame.target_mask * 255).astype(np.uint8)
-        before = h.node.status().images_received
-        h.send(array_to_image(np.dstack([frame.rgb, alpha]), "rgba8", stamp))
-        wait_for(lambda before=before: h.node.status().images_received == before + 1, "the image")
-        assert h.call("capture").success
-    wait_for(lambda: all(view.input.depth is not None for view in h.node._buffer.snapshot()), "both depth images")
+    with_alpha = [np.dstack([frame.rgb, (frame.target_mask * 255).astype(np.uint8)]) for frame in frames]
+    capture_with_depth(h, wait_for, frames, [array_to_image(rgba, "rgba8") for rgba in with_alpha])
 
     status, result = ActionProbe(h).run()
     assert status == GoalStatus.STATUS_SUCCEEDED, result.error_message
@@ -92,22 +103,8 @@ def test_the_arms_camera_pose_poses_a_view_with_depth(harness, tabletop, wait_fo
     hypothesis: the verified pose of the second view is the camera's true pose, whatever the random model says."""
     frames, cameras = tabletop
     h = harness(capture_mode="on_request")
-    depth = h.probe.create_publisher(Image, "depth", 10)
-    info = h.probe.create_publisher(CameraInfo, "camera_info", 10)
-    arm = h.probe.create_publisher(PoseStamped, "camera_pose", 10)
-    wait_for(lambda: depth.get_subscription_count() and info.get_subscription_count() and arm.get_subscription_count(),
-             "the input subscriptions")
-    info.publish(matrix_to_camera_info(pinhole_camera_matrix(SIZE, SIZE, FOV), SIZE, SIZE, header("cam", 1)))
-    for k, (frame, camera) in enumerate(zip(frames, cameras)):
-        stamp = header("cam", 10 + k)
-        arm.publish(PoseStamped(header=stamp, pose=matrix_to_pose(camera)))
-        depth.publish(array_to_image(frame.depth, "32FC1", stamp))
-        before = h.node.status().images_received
-        h.send(array_to_image(frame.rgb, "rgb8", stamp))
-        wait_for(lambda before=before: h.node.status().images_received == before + 1, "the image")
-        assert h.call("capture").success
-    wait_for(lambda: all(view.input.depth is not None and view.input.camera_pose is not None
-                         for view in h.node._buffer.snapshot()), "both views' depth and camera pose")
+    capture_with_depth(h, wait_for, frames, [array_to_image(frame.rgb, "rgb8") for frame in frames], cameras)
+    assert all(view.input.camera_pose is not None for view in h.node._buffer.snapshot())
 
     status, result = ActionProbe(h).run()
     assert status == GoalStatus.STATUS_SUCCEEDED, result.error_message

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import view_cloud
-from idpose_core.depth_segmentation import object_centre
+from idpose_core.depth_segmentation import backproject, object_centre
 from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses import Source, VerificationSettings, verify_with_depth
 from idpose_core.pose_hypotheses.hypothesis import same_pose
@@ -64,7 +64,8 @@ def no_diffusion(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def evidence(view: ViewInput, mask: np.ndarray, extent: float):
-    return view_evidence(view.depth, view.intrinsics, view.rgb, mask, object_centre(view, mask), extent)
+    points, valid = backproject(view.depth, view.intrinsics)
+    return view_evidence(points, valid, view.intrinsics, view.rgb, mask, object_centre(view, mask), extent)
 
 
 def yaw_turned(pose: np.ndarray, degrees: float, about: np.ndarray) -> np.ndarray:

@@ -72,8 +72,8 @@ class DepthRefinement:
     """``poses`` (N, 4, 4): each camera in the anchor's optical frame, refined where ``views[k].refined``, else the
     diffusion pose; ``cloud``: the anchor's and the refined views' object points, fused in the anchor's frame;
     ``voxel_size`` (m) the registration used (the cloud has its own); ``runner_up_poses`` (N, 4, 4): where a
-    verifier chose the poses (``idpose_core.pose_hypotheses``), each view's best pose of another cluster (NaN where
-    none); None from ``refine_with_depth``."""
+    verifier chose the poses (``idpose_core.pose_hypotheses``), each view's runner-up (the verifier's best pose of
+    another cluster, NaN where none; the diffusion's for a view it did not pose); None from ``refine_with_depth``."""
 
     poses: np.ndarray
     views: list[ViewRefinement]

@@ -9,6 +9,7 @@ another cluster. With more than two views, every pair that agrees with the place
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -27,7 +28,7 @@ class ChosenPose:
     """One view's pose in the anchor's frame (``pose`` (4, 4)), the ``source`` of the hypothesis it came from, its
     joint ``score``, its ``margin`` over the best candidate of another cluster (``runner_up`` (4, 4), NaN where
     there is none), and the ``loop_residual_deg``: the largest rotation residual (deg) of the pose graph's edges
-    at this view (0 with two views)."""
+    at this view (NaN with two views: no pose graph)."""
 
     pose: np.ndarray
     source: Source
@@ -64,19 +65,21 @@ def choose_poses(evidence: Sequence[ViewEvidence | None], rankings: Mapping[tupl
     chosen: dict[int, ChosenPose] = {}
     for _ in range(ROUNDS if len(placeable) > 1 else 1):
         for k in order:
-            candidates = list(rankings[(0, k)].clusters)
-            for j, placed in poses.items():
-                if j not in (0, k) and ((j, k) in rankings or (k, j) in rankings):
-                    candidates += [ScoredHypothesis(placed @ h.transform, h.source, h.score, h.object_score)
-                                   for h in relative(rankings, j, k)]
-            rescored = [ScoredHypothesis(c.transform, c.source, prior(c.source) + joint_score(
-                evidence, poses, k, c.transform, tolerance_floor), c.object_score) for c in candidates]
-            ranked = clusters_of(rescored, extent)
+            if set(poses) - {k} == {0}:  # only the anchor placed: the pair's own scores are the joint ones
+                ranked = rankings[(0, k)].clusters
+            else:
+                candidates = list(rankings[(0, k)].clusters)
+                for j, placed in poses.items():
+                    if j not in (0, k) and ((j, k) in rankings or (k, j) in rankings):
+                        candidates += [ScoredHypothesis(placed @ h.transform, h.source, h.score, h.object_score)
+                                       for h in relative(rankings, j, k)]
+                ranked = clusters_of([ScoredHypothesis(c.transform, c.source, prior(c.source) + joint_score(
+                    evidence, poses, k, c.transform, tolerance_floor), c.object_score) for c in candidates], extent)
             best = ranked[0]
             margin = best.score - (ranked[1].score if len(ranked) > 1 else 0.0)
             runner_up = ranked[1].transform if len(ranked) > 1 else np.full((4, 4), np.nan)
             poses[k] = best.transform
-            chosen[k] = ChosenPose(best.transform, best.source, best.score, margin, runner_up, 0.0)
+            chosen[k] = ChosenPose(best.transform, best.source, best.score, margin, runner_up, math.nan)
     if len(chosen) < 2:
         return chosen
     fitted, loops = optimise(poses, agreeing_edges(rankings, poses), extent)

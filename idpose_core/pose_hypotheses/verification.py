@@ -7,6 +7,7 @@ pose, and says so. No ROS here.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -63,7 +64,8 @@ class ViewData:
 
 
 def view_data(view: ViewInput, mask: np.ndarray, extent: float | None) -> ViewData:
-    """What the verifier uses of a view: nothing, with a note, where its depth does not show the object."""
+    """What the verifier uses of a view: nothing, with a note, where its depth does not show the object; its
+    surroundings are taken ``extent`` (m, default the view's own object's) around the object."""
     if view.depth is None or view.intrinsics is None:
         return ViewData(None, None, None, None, "no depth: the diffusion pose")
     if view.depth.shape != view.rgb.shape[:2]:
@@ -82,7 +84,7 @@ def view_data(view: ViewInput, mask: np.ndarray, extent: float | None) -> ViewDa
         plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(0))
     except DepthSegmentationError:
         plane = None
-    evidence = view_evidence(view.depth, view.intrinsics, view.rgb, mask, centre, extent or cloud.extent())
+    evidence = view_evidence(points, valid, view.intrinsics, view.rgb, mask, centre, extent or cloud.extent())
     return ViewData(cloud, evidence, centre, plane, "")
 
 
@@ -124,18 +126,16 @@ def object_moved(ranking: PairRanking, settings: VerificationSettings) -> bool:
 def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray,
                       runner_up_poses: np.ndarray, cloud_voxel_size: float,
                       settings: VerificationSettings = VerificationSettings()) -> DepthRefinement | None:
-    """Choose the poses (N, 4, 4, anchor's optical frame) of views with depth among every source's hypotheses;
-    ``poses`` and ``runner_up_poses`` are the diffusion's answers and runner-ups (NaN where none), which views
-    without depth keep. None when the anchor shows no object depth."""
+    """Choose the poses (N, 4, 4, anchor's optical frame) of views with depth among every source's hypotheses, and
+    their runner-ups; ``poses`` and ``runner_up_poses`` are the diffusion's answers and runner-ups (NaN where none),
+    which views without depth keep. None when the anchor shows no object depth."""
     poses = np.asarray(poses, dtype=np.float64)
-    anchor_cloud = view_cloud(views[0], masks[0]) if views[0].depth is not None else None
-    if anchor_cloud is None:
+    anchor = view_data(views[0], masks[0], None)
+    if anchor.evidence is None:
         return None
-    extent = anchor_cloud.extent()
+    extent = anchor.cloud.extent()
     voxel = float(np.clip(VOXEL_SHARE * extent, *VOXEL_RANGE))
-    data = [view_data(view, mask, extent) for view, mask in zip(views, masks)]
-    if data[0].evidence is None:
-        return None
+    data = [anchor] + [view_data(view, mask, extent) for view, mask in zip(views[1:], masks[1:])]
     seeds = np.full((len(views), 2, 4, 4), math.nan)
     for k, item in enumerate(data):
         if item.centre is not None:
@@ -144,16 +144,13 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
                     seeds[k, option] = depth_seed(diffusion, data[0].centre, item.centre)
     with_depth = [k for k, item in enumerate(data) if item.evidence is not None]
     rankings = {}
-    for target in with_depth:
-        for source in with_depth:
-            if source > target:
-                hypotheses = pair_hypotheses(views, data, seeds, target, source, extent, settings)
-                pair = prepare_pair(data[source].cloud.points, data[target].cloud.points, voxel, extent)
-                rankings[(target, source)] = rank_pair(data[target].evidence, data[source].evidence, pair,
-                                                       hypotheses)
+    for target, source in itertools.combinations(with_depth, 2):
+        hypotheses = pair_hypotheses(views, data, seeds, target, source, extent, settings)
+        pair = prepare_pair(data[source].cloud.points, data[target].cloud.points, voxel, extent)
+        rankings[(target, source)] = rank_pair(data[target].evidence, data[source].evidence, pair, hypotheses)
     chosen = choose_poses([item.evidence for item in data], rankings, extent, voxel)
     current = poses.copy()
-    runners = np.full_like(poses, math.nan)
+    runners = np.array(runner_up_poses, dtype=np.float64)
     reports = [ViewRefinement(False, "the anchor", math.nan, math.nan, 0.0, 0.0)]
     anchor_tree = small_gicp.KdTree(small_gicp.PointCloud(data[0].cloud.points))
     for k in range(1, len(views)):
@@ -164,7 +161,7 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
         current[k], runners[k] = pick.pose, pick.runner_up
         fitness, rmse = alignment_quality(data[k].cloud.points, anchor_tree, pick.pose, 2.0 * voxel)
         rotation, translation = pose_change(pick.pose, poses[k])
-        loop = pick.loop_residual_deg if len(chosen) > 1 else math.nan
+        loop = pick.loop_residual_deg
         ambiguous = pick.margin < settings.ambiguity_margin or loop > settings.max_loop_residual_deg
         note = ("" if not ambiguous else f"runner-up within {pick.margin:.2f} of the best"
                 if pick.margin < settings.ambiguity_margin else f"the views disagree by {loop:.0f} deg")

@@ -15,8 +15,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from idpose_core.depth_segmentation import backproject
-
 MAX_POINTS = 1500  # points each direction checks: a fixed sample keeps the cost per hypothesis flat
 SURFACE_SHARE = 0.012  # of the depth: a point within this (or the caller's floor) of the surface lies on it
 ANGLE_SLACK = 0.05  # rad: a point this far off per metre from the object's centre still counts on the surface
@@ -91,12 +89,11 @@ def _region(mask: np.ndarray, points: np.ndarray, chroma: np.ndarray, rng: np.ra
     return Region(mask, points.reshape(-1, 3)[inside], chroma.reshape(-1, 2)[inside])
 
 
-def view_evidence(depth: np.ndarray, intrinsics: np.ndarray, rgb: np.ndarray, mask: np.ndarray,
+def view_evidence(points: np.ndarray, valid: np.ndarray, intrinsics: np.ndarray, rgb: np.ndarray, mask: np.ndarray,
                   centre: np.ndarray, extent: float, seed: int = 0) -> ViewEvidence:
-    """A view's evidence from its depth (m; NaN or 0 = no reading), intrinsics, colour image, object ``mask``
-    (H, W) bool, the object's ``centre`` (3,) and size ``extent`` (m)."""
-    depth = np.nan_to_num(np.asarray(depth, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-    points, valid = backproject(depth, intrinsics)
+    """A view's evidence from its depth back-projected (``backproject``: ``points`` (H, W, 3), ``valid`` (H, W)),
+    intrinsics, colour image, object ``mask`` (H, W) bool, the object's ``centre`` (3,) and size ``extent`` (m)."""
+    depth = np.where(valid, points[..., 2], 0.0)
     chroma = chromaticity(rgb)
     grown = cv2.dilate(np.asarray(mask, np.uint8), np.ones((2 * MASK_GROWTH_PX + 1,) * 2, np.uint8)).astype(bool)
     near = valid & (np.linalg.norm(points - centre, axis=-1) <= CONTEXT_EXTENTS * extent)
