@@ -21,7 +21,7 @@ from idpose_core.depth_fusion import DepthRefinement, ObjectFrame, ViewRefinemen
 from idpose_core.depth_segmentation import DepthSegmentationError, object_distance
 from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, with_roll
-from idpose_core.next_view import NextView, ReachableSet, suggest_next_view, view_spheres
+from idpose_core.next_view import NextView, ReachableSet, pose_spheres, suggest_next_view, view_spheres
 from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.pose_hypotheses import VerificationSettings, verify_with_depth
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
@@ -179,23 +179,36 @@ def hypothesis_spheres(solved: SolverResult, polar_deg: float, distance: float) 
 
 
 def next_view_for(solved: SolverResult, polar_deg: float, distance: float, anchor_roll: float,
-                  settings: PipelineSettings) -> NextView:
+                  settings: PipelineSettings, depth: DepthRefinement | None = None) -> NextView:
     """The next camera to capture from the solver's answers and runner-ups, the anchor at ``polar_deg`` and
-    ``distance`` with roll ``anchor_roll`` (rad)."""
-    return suggest_next_view(*hypothesis_spheres(solved, polar_deg, distance),
-                             np.r_[False, np.asarray(solved.ambiguous, bool)],
-                             np.r_[1.0, np.asarray(solved.confidence, np.float64)], settings.reachable,
+    ``distance`` with roll ``anchor_roll`` (rad). Where the verifier chose a view's pose (``depth``, a finite
+    margin), its pose, runner-up and ambiguity replace the solver's, and its margin as a share of the ambiguity
+    margin is the view's confidence: an ambiguous view is settled by a camera between it and a trusted one."""
+    spheres, rivals = hypothesis_spheres(solved, polar_deg, distance)
+    ambiguous = np.r_[False, np.asarray(solved.ambiguous, bool)]
+    confidence = np.r_[1.0, np.asarray(solved.confidence, np.float64)]
+    verified = [] if depth is None or depth.runner_up_poses is None else [
+        k for k, view in enumerate(depth.views) if k and math.isfinite(view.margin)]
+    if verified:
+        polar = math.radians(polar_deg)
+        spheres[verified] = pose_spheres(depth.poses[verified], polar, distance, anchor_roll)
+        rivals[verified] = pose_spheres(depth.runner_up_poses[verified], polar, distance, anchor_roll)
+        ambiguous[verified] = [depth.views[k].ambiguous for k in verified]
+        confidence[verified] = np.clip([depth.views[k].margin / settings.verification.ambiguity_margin
+                                        for k in verified], 0.0, 1.0)
+    return suggest_next_view(spheres, rivals, ambiguous, confidence, settings.reachable,
                              settings.next_view_criterion, anchor_roll)
 
 
 def depth_poses(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray, runners: np.ndarray,
-                settings: PipelineSettings) -> DepthRefinement | None:
-    """The poses of views with depth as ``settings.depth_poses`` sets them (None with ``depth_refinement`` off or no
-    object depth on the anchor)."""
+                confidence: np.ndarray, settings: PipelineSettings) -> DepthRefinement | None:
+    """The poses of views with depth as ``settings.depth_poses`` sets them, from the diffusion's ``poses``, runner-ups
+    and ``confidence`` (N,) (None with ``depth_refinement`` off or no object depth on the anchor)."""
     if not settings.depth_refinement:
         return None
     if settings.depth_poses == "verify":
-        return verify_with_depth(views, masks, poses, runners, settings.cloud_voxel_size, settings.verification)
+        return verify_with_depth(views, masks, poses, runners, settings.cloud_voxel_size, settings.verification,
+                                 confidence)
     return refine_with_depth(views, masks, poses, settings.cloud_voxel_size)
 
 
@@ -243,7 +256,7 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     poses = with_roll(anchor_frame_poses(solved.rel_poses, math.radians(polar_deg), distance), np.array(rolls))
     reports = with_ambiguity(reports, solved.ambiguous)
     runners = runner_up_poses(solved, polar_deg, distance, rolls)
-    depth = depth_poses(views, masks, poses, runners, settings)
+    depth = depth_poses(views, masks, poses, runners, np.r_[1.0, solved.confidence], settings)
     if depth is not None:
         poses = depth.poses
         reports = [with_refinement(report, refinement) for report, refinement in zip(reports, depth.views)]
@@ -254,7 +267,7 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
                           anchor_polar_deg=polar_deg,
                           polar_source="gravity" if anchor.polar_deg is not None else "parameter",
                           object_distance=distance, distance_source="depth" if anchor.distance else "parameter",
-                          next_view=next_view_for(solved, polar_deg, distance, rolls[0], settings), depth=depth,
+                          next_view=next_view_for(solved, polar_deg, distance, rolls[0], settings, depth), depth=depth,
                           object=None if depth is None else object_frame(depth.cloud, views[0].gravity_up))
 
 

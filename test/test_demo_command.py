@@ -1,5 +1,6 @@
 """`./run demo` (idpose_ros.demo) evaluates every shipped demo bag with the embedded model and sums up."""
 import json
+import math
 
 import pytest
 
@@ -27,12 +28,19 @@ def test_demo_evaluates_each_demo_object_with_the_embedded_model(tmp_path, monke
     assert "| all | 6 |" in summary.split("never saw")[0]
     novel = [bag.name for bag in demo.novel_demo_bags()]
     assert novel == ["blob_880", "toy_heldout_0080"]
-    unseen = out.split("Objects the embedded model never saw")[1].split("On a tabletop")[0]
+    unseen = out.split("Objects the embedded model never saw")[1].split("on a tabletop")[0]
     for name in novel:
         assert f"| {name} | 1 |" in unseen
-    assert [bag.name for bag in demo.robot_demo_bags()] == ["duck_tabletop"]
-    robot = json.loads((tmp_path / "demo_output" / "duck_tabletop" / "report.json").read_text())
-    assert robot["aggregates"]["2"]["pairs"] == 1
-    details = robot["estimates"][0]["details"]
-    assert details["distance_source"] == "depth" and details["polar_source"] == "gravity", "the robot's inputs are read"
-    assert "| duck_tabletop | 1 |" in out.split("On a tabletop")[1]
+    robot_bag = "toy_heldout_0080_tabletop"
+    assert [bag.name for bag in demo.robot_demo_bags()] == [robot_bag]
+    posed, alone = (json.loads((tmp_path / "demo_output" / folder / robot_bag / "report.json").read_text())
+                    for folder in (".", "diffusion_only"))
+    for report in (posed, alone):
+        assert report["aggregates"]["2"]["pairs"] == 1
+        details = report["estimates"][0]["details"]
+        assert details["distance_source"] == "depth" and details["polar_source"] == "gravity", "the inputs are read"
+    margins = [[view["refinement"]["margin"] for view in report["estimates"][0]["details"]["views"][1:]]
+               for report in (posed, alone)]
+    assert all(math.isfinite(m) for m in margins[0]) and all(math.isnan(m) for m in margins[1]), "verifier, then not"
+    tabletop, diffusion_only = out.split("on a tabletop")[1].split("the diffusion estimate alone")
+    assert f"| {robot_bag} | 1 |" in tabletop and f"| {robot_bag} | 1 |" in diffusion_only

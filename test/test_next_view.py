@@ -6,9 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from idpose_core.gravity import rz
-from idpose_core.next_view import ReachableSet, suggest_next_view, view_spheres
+from idpose_core.cameras import first_camera_frame_poses
+from idpose_core.depth_fusion.clouds import ObjectCloud
+from idpose_core.depth_fusion.refinement import DepthRefinement, ViewRefinement
+from idpose_core.gravity import rz, with_roll
+from idpose_core.next_view import ReachableSet, pose_spheres, suggest_next_view, view_spheres
 from idpose_core.next_view.suggestion import angles_between
+from idpose_core.pipeline import PipelineSettings, next_view_for
+from idpose_core.solver import SolverConfig
+from idpose_core.solver.result import SolverResult
 
 DISTANCE = 0.6
 POLAR = math.radians(60.0)
@@ -57,6 +63,17 @@ def test_view_spheres_place_the_views_and_keep_missing_rows():
     assert np.allclose(spheres[0], [POLAR, 0.0, DISTANCE])
     assert np.allclose(spheres[1], [POLAR + 0.1, math.pi / 2, DISTANCE])
     assert np.isnan(spheres[2]).all()
+
+
+def test_pose_spheres_undo_placing_rolled_cameras_and_keep_missing_rows():
+    spheres = np.array([[POLAR, 0.0, DISTANCE], [math.radians(80.0), math.radians(130.0), 0.9],
+                        [math.radians(35.0), math.radians(-40.0), 0.4]])
+    rolls = np.radians([20.0, -35.0, 5.0])
+    poses = with_roll(first_camera_frame_poses(spheres), rolls)
+    poses[2] = np.nan
+    found = pose_spheres(poses, POLAR, DISTANCE, float(rolls[0]))
+    assert np.allclose(found[:2], spheres[:2] % [np.inf, 2 * math.pi, np.inf])
+    assert np.isnan(found[2]).all()
 
 
 def test_bridge_stands_between_the_trusted_anchor_and_the_answer():
@@ -125,3 +142,22 @@ def test_a_rolled_anchor_gets_the_same_camera_in_its_own_frame():
     up = turn.T @ np.array([0.0, -math.sin(POLAR), -math.cos(POLAR)])  # world up in the rolled anchor's frame
     assert np.allclose(rolled[:3, 3], turn.T @ upright[:3, 3])
     assert abs(rolled[:3, 0] @ up) < 1e-9 and rolled[:3, 1] @ up < 0.0
+
+
+def test_where_the_verifier_chose_a_pose_its_ambiguity_sets_the_next_view():
+    """The solver is sure of view 1 at azimuth 90; the verifier placed it at 60 with a runner-up at 150, too close
+    to tell: the next camera settles the verifier's doubt, not the solver's."""
+    solved = SolverResult(np.array([[0.0, math.radians(90.0), 0.0]]), np.zeros(1), np.full((1, 3), np.nan),
+                          np.full(1, np.nan), np.array([False]), np.ones(1), 0, 0)
+    settings = PipelineSettings(SolverConfig())
+    assert next_view_for(solved, math.degrees(POLAR), DISTANCE, 0.0, settings).view is None
+    spheres = np.array([[POLAR, 0.0, DISTANCE], [POLAR, math.radians(60.0), DISTANCE],
+                        [POLAR, math.radians(150.0), DISTANCE]])
+    placed = first_camera_frame_poses(spheres)
+    refinements = [ViewRefinement(False, "the anchor", math.nan, math.nan, 0.0, 0.0),
+                   ViewRefinement(True, "", 1.0, 0.0, 30.0, 0.1, "gravity", 0.1, True)]
+    cloud = ObjectCloud(np.zeros((1, 3)), np.zeros((1, 3), np.uint8))
+    depth = DepthRefinement(placed[:2], refinements, cloud, 0.005, np.stack([np.full((4, 4), np.nan), placed[2]]))
+    suggestion = next_view_for(solved, math.degrees(POLAR), DISTANCE, 0.0, settings, depth)
+    assert suggestion.view == 1
+    assert "76 deg apart" in suggestion.reason  # polar 60, azimuths 90 deg apart

@@ -18,8 +18,9 @@ from idpose_core.depth_segmentation import backproject, object_centre
 from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses import Source, VerificationSettings, verify_with_depth
 from idpose_core.pose_hypotheses.hypothesis import same_pose
-from idpose_core.pose_hypotheses.sources import arm_hypothesis, gravity_hypotheses
-from idpose_core.pose_hypotheses.verifier import verify, view_evidence
+from idpose_core.pose_hypotheses.pair import ARM_PRIOR, ARM_TOLERANCE_DEG, DIFFUSION_TOLERANCE_DEG, Priors
+from idpose_core.pose_hypotheses.sources import arm_hypotheses, arm_pose, gravity_hypotheses
+from idpose_core.pose_hypotheses.verifier import nearest_reading, one_way, verify, view_evidence
 from idpose_core.synthetic.scenes import demo_objects
 from idpose_core.synthetic.tabletop import TabletopRenderer, challenge_camera, random_layout
 from idpose_core.view_input import ViewInput
@@ -88,6 +89,27 @@ def test_the_verifier_scores_the_true_pose_above_a_turned_one(scene):
     assert right.object.support > 0.5 and right.context.free_space < 0.05
 
 
+def test_a_point_a_pixel_off_an_outline_is_not_in_free_space_but_one_well_clear_of_it_is():
+    """A square 0.5 m away before a wall at 1 m: a point at the square's depth that projects one pixel beyond its
+    outline (an arm's error, a rounding) is beside the surface, not in front of the wall; one 15 px beyond is."""
+    depth = np.full((SIZE, SIZE), 1.0)
+    depth[60:100, 60:100] = 0.5
+    depth[:5, :5] = 0.0  # no readings in a corner: no nearest reading either
+    mask = depth == 0.5
+    points, valid = backproject(depth, K)
+    rgb = np.full((SIZE, SIZE, 3), 128, np.uint8)
+    seen = view_evidence(points, valid, K, rgb, mask, np.array([0.0, 0.0, 0.5]), 0.1)
+    assert seen.nearest[2, 2] == 0.0 and seen.nearest[5, 5] == 1.0 and seen.nearest[80, 101] == 0.5
+
+    def free_share(u: float) -> float:
+        point = 0.5 * np.linalg.solve(K, [u, 80.0, 1.0])
+        return one_way(point[None], np.zeros((1, 2)), seen, seen.object.mask, np.eye(4), 0.001).free_space
+
+    assert free_share(100.0) == 0.0
+    assert free_share(115.0) == 1.0
+    np.testing.assert_array_equal(nearest_reading(depth, 0), depth)
+
+
 def test_the_gravity_search_holds_a_yaw_within_its_step_of_the_truth(scene):
     views, masks, cameras, _, _ = scene
     first, second = (view_cloud(views[k], masks[k]) for k in (0, 1))
@@ -99,11 +121,13 @@ def test_the_gravity_search_holds_a_yaw_within_its_step_of_the_truth(scene):
     assert min(errors) <= 2.5 + 0.5  # half the 5-deg yaw step, and the level frames' rounding
 
 
-def test_the_arm_hypothesis_is_the_cameras_relative_pose(scene):
+def test_the_arm_hypotheses_are_the_cameras_relative_pose_as_measured_and_to_register(scene):
     _, _, cameras, _, _ = scene
-    hypothesis = arm_hypothesis(cameras[2], cameras[0])
-    np.testing.assert_allclose(hypothesis.transform, truth(cameras)[2], atol=1e-9)
-    assert hypothesis.source == Source.ARM
+    measured = arm_pose(cameras[2], cameras[0])
+    np.testing.assert_allclose(measured, truth(cameras)[2], atol=1e-9)
+    as_measured, to_register = arm_hypotheses(measured)
+    assert {as_measured.source, to_register.source} == {Source.ARM}
+    assert as_measured.stages == () and to_register.stages
 
 
 @pytest.mark.slow
@@ -131,6 +155,23 @@ def test_the_arms_pose_wins_and_a_moved_object_is_flagged(scene):
     assert not kept.views[1].object_moved
     moved = verify_with_depth([views[0], moved_view], [masks[0], moved_mask], *no_diffusion(2), 0.005)
     assert moved.views[1].object_moved
+    turn = Rotation.from_euler("z", -MOVED_DEG, degrees=True).as_matrix()
+    relative_to_object = cameras[0][:3, :3].T @ turn @ cameras[1][:3, :3]
+    assert rotation_angle_deg(moved.poses[1][:3, :3], relative_to_object) < 10.0, "the pose is the object's"
+
+
+def test_a_pose_near_the_arms_gets_its_prior_whatever_its_source_and_the_diffusion_answer_its_trust():
+    def turned(degrees: float) -> np.ndarray:
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_euler("z", degrees, degrees=True).as_matrix()
+        return pose
+
+    near, far = turned(ARM_TOLERANCE_DEG / 2), turned(2 * DIFFUSION_TOLERANCE_DEG)
+    assert Priors(arm=np.eye(4)).of(near, 0.2) == ARM_PRIOR > 0.0
+    assert Priors(arm=np.eye(4)).of(far, 0.2) == 0.0 == Priors().of(near, 0.2)
+    trusted = Priors(diffusion=np.eye(4), diffusion_weight=0.4)
+    assert trusted.of(near, 0.2) == 0.4 and trusted.of(far, 0.2) == 0.0
+    assert Priors(np.eye(4), np.eye(4), 0.4).of(near, 0.2) == ARM_PRIOR + 0.4
 
 
 def test_only_the_diffusion_source_is_asked_when_the_others_are_off(scene):

@@ -4,6 +4,6 @@
 hypotheses (each ambiguous view's answer and runner-up) or, when nothing is ambiguous, against coverage. No ROS.
 """
 from idpose_core.next_view.reachable import ReachableSet
-from idpose_core.next_view.suggestion import CRITERIA, NextView, suggest_next_view, view_spheres
+from idpose_core.next_view.suggestion import CRITERIA, NextView, pose_spheres, suggest_next_view, view_spheres
 
-__all__ = ["CRITERIA", "NextView", "ReachableSet", "suggest_next_view", "view_spheres"]
+__all__ = ["CRITERIA", "NextView", "ReachableSet", "pose_spheres", "suggest_next_view", "view_spheres"]

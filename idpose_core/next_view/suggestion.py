@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from idpose_core.cameras import apply_relative, first_camera_frame_poses
-from idpose_core.gravity import with_roll
+from idpose_core.cameras import apply_relative, first_camera_frame_poses, opengl_to_optical, spherical_to_c2w
+from idpose_core.gravity import rz, with_roll
 from idpose_core.next_view.reachable import ReachableSet
-from idpose_core.spherical import spherical_to_cartesian
+from idpose_core.spherical import cartesian_to_spherical, spherical_to_cartesian
 
 # Among candidates scoring the same, prefer the one nearest the trusted views, by this much per radian: a camera
 # whose own pose is easy to find is worth more.
@@ -49,6 +49,17 @@ def view_spheres(rel_poses: np.ndarray, anchor_polar: float, distance: float) ->
     if found.any():
         spheres[1:][found] = apply_relative(anchor, rel[found])
     return spheres
+
+
+def pose_spheres(poses: np.ndarray, anchor_polar: float, distance: float, anchor_roll: float) -> np.ndarray:
+    """Spheres (N, 3) of the cameras whose optical frames ``poses`` (N, 4, 4) are given in the real anchor's frame
+    (the upright anchor turned by ``anchor_roll`` rad about its axis), the anchor at (``anchor_polar``, 0,
+    ``distance``) looking at the object centre; a NaN pose gives a NaN row. The inverse of placing spheres with
+    ``first_camera_frame_poses`` and ``with_roll``."""
+    world_from_anchor = opengl_to_optical(spherical_to_c2w(np.array([anchor_polar, 0.0, distance])))
+    turn = np.eye(4)
+    turn[:3, :3] = rz(anchor_roll)
+    return cartesian_to_spherical((world_from_anchor @ turn @ np.asarray(poses, np.float64))[:, :3, 3])
 
 
 def angles_between(spheres_a: np.ndarray, spheres_b: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from idpose_core.pose_hypotheses.hypothesis import ScoredHypothesis, Source
-from idpose_core.pose_hypotheses.pair import PairRanking, clusters_of, prior
+from idpose_core.pose_hypotheses.pair import PairRanking, clusters_of
 from idpose_core.pose_hypotheses.pose_graph import agreeing_edges, optimise
 from idpose_core.pose_hypotheses.verifier import ViewEvidence, verify
 
@@ -73,8 +73,10 @@ def choose_poses(evidence: Sequence[ViewEvidence | None], rankings: Mapping[tupl
                     if j not in (0, k) and ((j, k) in rankings or (k, j) in rankings):
                         candidates += [ScoredHypothesis(placed @ h.transform, h.source, h.score, h.object_score)
                                        for h in relative(rankings, j, k)]
-                ranked = clusters_of([ScoredHypothesis(c.transform, c.source, prior(c.source) + joint_score(
-                    evidence, poses, k, c.transform, tolerance_floor), c.object_score) for c in candidates], extent)
+                priors = rankings[(0, k)].priors
+                ranked = clusters_of([ScoredHypothesis(
+                    c.transform, c.source, priors.of(c.transform, extent) + joint_score(
+                        evidence, poses, k, c.transform, tolerance_floor), c.object_score) for c in candidates], extent)
             best = ranked[0]
             margin = best.score - (ranked[1].score if len(ranked) > 1 else 0.0)
             runner_up = ranked[1].transform if len(ranked) > 1 else np.full((4, 4), np.nan)

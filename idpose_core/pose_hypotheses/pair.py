@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import small_gicp
 
+from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses.hypothesis import Hypothesis, ScoredHypothesis, Source, same_pose
 from idpose_core.pose_hypotheses.verifier import ViewEvidence, verify
 
@@ -16,8 +17,13 @@ CLUSTER_DEG = 10.0  # hypotheses this close in rotation (and ``CLUSTER_SHARE`` o
 CLUSTER_SHARE = 0.25
 POLISHED = 8  # the best clusters that get a polish on the object and its surroundings after scoring
 CONTEXT_STAGES = (0.05, 0.025)  # that polish's match distances (shares of the object's extent)
-# The arm's pose is a measurement, good to about a degree: it wins unless another pose scores this much better
-ARM_PRIOR = 0.3
+# The arm's pose is a measurement, good to a degree or two: a pose near it (within ``ARM_TOLERANCE_DEG`` and
+# ``CLUSTER_SHARE`` of the extent), whatever its source, wins unless a pose far from it scores ``ARM_PRIOR`` better
+ARM_PRIOR = 0.5
+ARM_TOLERANCE_DEG = 5.0
+# The diffusion answer is as good as the model: a pose within this (deg) of it gets the trust the settings give the
+# model, times the solver's confidence in it
+DIFFUSION_TOLERANCE_DEG = 15.0
 
 
 @dataclass(frozen=True)
@@ -33,11 +39,34 @@ class PairClouds:
 
 
 @dataclass(frozen=True)
+class Priors:
+    """What a pair's poses get before the verifier speaks: ``ARM_PRIOR`` near the ``arm``'s measured pose (4, 4),
+    and ``diffusion_weight`` within ``DIFFUSION_TOLERANCE_DEG`` of the ``diffusion`` answer (4, 4) (None: none)."""
+
+    arm: np.ndarray | None = None
+    diffusion: np.ndarray | None = None
+    diffusion_weight: float = 0.0
+
+    def near_arm(self, transform: np.ndarray, extent: float) -> bool:
+        """Whether ``transform`` (4, 4) lies within the arm's error of the pose it measured."""
+        return self.arm is not None and same_pose(transform, self.arm, ARM_TOLERANCE_DEG, CLUSTER_SHARE * extent)
+
+    def of(self, transform: np.ndarray, extent: float) -> float:
+        """The prior of ``transform`` (4, 4) in a pair whose object is ``extent`` (m) across."""
+        near_diffusion = (self.diffusion is not None and self.diffusion_weight > 0.0 and float(rotation_angle_deg(
+            transform[:3, :3], self.diffusion[:3, :3])) <= DIFFUSION_TOLERANCE_DEG)
+        return (ARM_PRIOR if self.near_arm(transform, extent) else 0.0) + (
+            self.diffusion_weight if near_diffusion else 0.0)
+
+
+@dataclass(frozen=True)
 class PairRanking:
-    """A pair's hypotheses, one per cluster, best first (at least one), and every hypothesis scored (``scored``)."""
+    """A pair's hypotheses, one per cluster, best first (at least one), every hypothesis scored (``scored``), and
+    the ``priors`` they were scored with."""
 
     clusters: list[ScoredHypothesis]
     scored: list[ScoredHypothesis]
+    priors: Priors = Priors()
 
     @property
     def best(self) -> ScoredHypothesis:
@@ -52,15 +81,6 @@ class PairRanking:
     def margin(self) -> float:
         """The best score's lead over the runner-up (the best score itself when there is none)."""
         return self.best.score - (self.runner_up.score if self.runner_up is not None else 0.0)
-
-    def best_of(self, source: Source) -> ScoredHypothesis | None:
-        """The best-scoring hypothesis that came from ``source``, if any."""
-        return max((h for h in self.scored if h.source == source), key=lambda h: h.score, default=None)
-
-
-def prior(source: Source) -> float:
-    """What a source's hypotheses get before the verifier speaks: ``ARM_PRIOR`` for the arm's, else nothing."""
-    return ARM_PRIOR if source == Source.ARM else 0.0
 
 
 def prepare_pair(source: np.ndarray, target: np.ndarray, voxel: float, extent: float) -> PairClouds:
@@ -92,19 +112,21 @@ def clusters_of(scored: Sequence[ScoredHypothesis], extent: float) -> list[Score
     return leaders
 
 
-def rank_pair(target: ViewEvidence, source: ViewEvidence, pair: PairClouds,
-              hypotheses: Sequence[Hypothesis]) -> PairRanking:
+def rank_pair(target: ViewEvidence, source: ViewEvidence, pair: PairClouds, hypotheses: Sequence[Hypothesis],
+              priors: Priors = Priors()) -> PairRanking:
     """Each of the ``hypotheses`` (source view in target view) registered locally as it asks, scored by the
-    verifier on both views, ranked per cluster; the ``POLISHED`` best clusters are polished by registering the
-    object with its surroundings (the table patch and what stands near fix a slide the object alone leaves free),
-    and keep the polish where it scores higher. Needs at least one hypothesis."""
-    def scored(transform: np.ndarray, origin) -> ScoredHypothesis:
+    verifier on both views (with their ``priors``), ranked per cluster; the
+    ``POLISHED`` best clusters are polished by registering the object with its surroundings (the table patch and
+    what stands near fix a slide the object alone leaves free), and keep the polish where it scores higher. Needs
+    at least one hypothesis."""
+    def scored(transform: np.ndarray, origin: Source) -> ScoredHypothesis:
         verdict = verify(target, source, transform, pair.voxel)
-        return ScoredHypothesis(transform, origin, verdict.score + prior(origin), verdict.object.score)
+        return ScoredHypothesis(transform, origin, verdict.score + priors.of(transform, pair.extent),
+                                verdict.object.score)
 
     found = [scored(refine(pair, h.transform, h.stages), h.source) for h in hypotheses]
     clusters = clusters_of(found, pair.extent)
     surroundings = prepare_pair(source.context.points, target.context.points, pair.voxel, pair.extent)
     polished = [scored(refine(surroundings, h.transform, CONTEXT_STAGES), h.source) for h in clusters[:POLISHED]]
     better = [p if p.score > h.score else h for p, h in zip(polished, clusters[:POLISHED])]
-    return PairRanking(clusters_of(better + clusters[POLISHED:], pair.extent), found + polished)
+    return PairRanking(clusters_of(better + clusters[POLISHED:], pair.extent), found + polished, priors)

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from idpose_core.depth_segmentation import Plane
 from idpose_core.gravity import level_from_optical, rz
-from idpose_core.pose_hypotheses.hypothesis import NEAR_STAGES, Hypothesis, Source
+from idpose_core.pose_hypotheses.hypothesis import FAR_STAGES, NEAR_STAGES, Hypothesis, Source
 
 YAW_STEPS = 72  # gravity: yaw candidates about the vertical (every 5 deg)
 SLIDE_ROUNDS = 8  # gravity: rounds of the sideways slide that lays the object clouds together
@@ -106,7 +106,14 @@ def gravity_hypotheses(source: np.ndarray, target: np.ndarray, source_up: np.nda
     return hypotheses
 
 
-def arm_hypothesis(source_in_fixed: np.ndarray, target_in_fixed: np.ndarray) -> Hypothesis:
-    """The relative pose the arm's kinematics give: both cameras' optical frames (4, 4) in one fixed frame;
-    polished only, so that a moved object does not pull it away."""
-    return Hypothesis(np.linalg.inv(target_in_fixed) @ source_in_fixed, Source.ARM, NEAR_STAGES)
+def arm_pose(source_in_fixed: np.ndarray, target_in_fixed: np.ndarray) -> np.ndarray:
+    """The relative pose (4, 4) the arm's kinematics measure: both cameras' optical frames (4, 4) in one fixed
+    frame."""
+    return np.linalg.inv(np.asarray(target_in_fixed, np.float64)) @ np.asarray(source_in_fixed, np.float64)
+
+
+def arm_hypotheses(measured: np.ndarray) -> list[Hypothesis]:
+    """The arm's ``measured`` relative pose (4, 4) as it is, and registered locally from there. A degree off in a
+    camera's orientation moves the object about a centimetre at half a metre: too far for a polish of near matches
+    alone. Noisy depth can slide a registration off; the measured pose keeps the verifier from losing the arm's."""
+    return [Hypothesis(measured, Source.ARM, ()), Hypothesis(measured, Source.ARM, FAR_STAGES)]

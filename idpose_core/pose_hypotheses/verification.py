@@ -26,16 +26,14 @@ from idpose_core.depth_fusion.refinement import (
 )
 from idpose_core.depth_fusion.registration import alignment_quality
 from idpose_core.depth_segmentation import DepthSegmentationError, Plane, backproject, object_centre, support_plane
-from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses.chain import choose_poses
 from idpose_core.pose_hypotheses.hypothesis import FAR_STAGES, Hypothesis, Source
-from idpose_core.pose_hypotheses.pair import PairRanking, prepare_pair, rank_pair
-from idpose_core.pose_hypotheses.sources import arm_hypothesis, gravity_hypotheses, registration_hypotheses
+from idpose_core.pose_hypotheses.pair import PairRanking, Priors, prepare_pair, rank_pair
+from idpose_core.pose_hypotheses.sources import arm_hypotheses, arm_pose, gravity_hypotheses, registration_hypotheses
 from idpose_core.pose_hypotheses.verifier import ViewEvidence, view_evidence
 from idpose_core.view_input import ViewInput
 
 ALL_SOURCES = frozenset(Source)
-MOVED_DEG = 5.0  # the arm's pose is "beaten" when the winner is this far from it (deg) and leads by ``moved_margin``
 
 
 @dataclass(frozen=True)
@@ -44,12 +42,14 @@ class VerificationSettings:
     gets); ``ambiguity_margin``: a view whose best pose leads the runner-up of another cluster by less is
     ambiguous, and so is one whose pose-graph loop residual exceeds ``max_loop_residual_deg`` (the views
     disagree); ``moved_margin``: by how much a pose far from the arm's must beat it for the object to count as
-    moved."""
+    moved; ``diffusion_trust``: the prior a pose near the diffusion answer gets, times the solver's confidence in
+    it (how far the loaded model is trusted on this object: the embedded model, at chance on a novel object, 0)."""
 
     sources: frozenset[Source] = ALL_SOURCES
     ambiguity_margin: float = 0.5
     max_loop_residual_deg: float = 10.0
     moved_margin: float = 0.3
+    diffusion_trust: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -88,10 +88,27 @@ def view_data(view: ViewInput, mask: np.ndarray, extent: float | None) -> ViewDa
     return ViewData(cloud, evidence, centre, plane, "")
 
 
+def pair_priors(views: Sequence[ViewInput], seeds: np.ndarray, confidence: np.ndarray, target: int, source: int,
+                settings: VerificationSettings) -> Priors:
+    """What the poses of view ``source`` in view ``target`` get before the verifier speaks: the arm's measured
+    pose (where both views carry a ``camera_pose`` and the arm's source is on) and the diffusion answer (``seeds``
+    (N, 2, 4, 4), NaN where none) weighted by ``diffusion_trust`` and the two views' ``confidence`` (N,)."""
+    pose_source, pose_target = views[source].camera_pose, views[target].camera_pose
+    arm = None
+    if Source.ARM in settings.sources and pose_source is not None and pose_target is not None:
+        arm = arm_pose(pose_source, pose_target)
+    diffusion = np.linalg.inv(seeds[target, 0]) @ seeds[source, 0]
+    if not np.all(np.isfinite(diffusion)):
+        return Priors(arm)
+    return Priors(arm, diffusion, settings.diffusion_trust * float(min(confidence[target], confidence[source])))
+
+
 def pair_hypotheses(views: Sequence[ViewInput], data: Sequence[ViewData], seeds: np.ndarray, target: int,
-                    source: int, extent: float, settings: VerificationSettings) -> list[Hypothesis]:
+                    source: int, extent: float, settings: VerificationSettings,
+                    arm: np.ndarray | None) -> list[Hypothesis]:
     """Every enabled source's proposals for view ``source`` in view ``target``'s frame; ``seeds`` (N, 2, 4, 4):
-    each view's diffusion answer and runner-up placed on its depth (NaN where it has none)."""
+    each view's diffusion answer and runner-up placed on its depth (NaN where it has none); ``arm``: the arm's
+    measured pose (None without it)."""
     first, second = data[target], data[source]
     hypotheses = []
     for option in range(seeds.shape[1]):
@@ -105,30 +122,30 @@ def pair_hypotheses(views: Sequence[ViewInput], data: Sequence[ViewData], seeds:
         planes = (second.plane, first.plane) if second.plane is not None and first.plane is not None else None
         hypotheses += gravity_hypotheses(second.cloud.points, first.cloud.points, up_source, up_target,
                                          second.centre, first.centre, extent, planes)
-    pose_source, pose_target = views[source].camera_pose, views[target].camera_pose
-    if Source.ARM in settings.sources and pose_source is not None and pose_target is not None:
-        hypotheses.append(arm_hypothesis(np.asarray(pose_source, np.float64), np.asarray(pose_target, np.float64)))
+    if arm is not None:
+        hypotheses += arm_hypotheses(arm)
     return hypotheses
 
 
-def object_moved(ranking: PairRanking, settings: VerificationSettings) -> bool:
-    """Whether the arm's pose lost clearly on the object itself: the hypothesis the object's points agree with best
-    lies ``MOVED_DEG`` from the arm's and leads it there by ``moved_margin`` (the surroundings, still in place,
-    may well agree with the arm)."""
-    arm = ranking.best_of(Source.ARM)
-    if arm is None:
+def object_moved(ranking: PairRanking, extent: float, settings: VerificationSettings) -> bool:
+    """Whether the object likely moved between the pair's views: the best pose, with the arm's prior, still lies
+    beyond the arm's error from the pose it measured, and the object's own points (the surroundings stood still
+    and may well agree with the arm) favour it over every pose near the arm's by ``moved_margin``."""
+    priors = ranking.priors
+    if priors.arm is None or priors.near_arm(ranking.best.transform, extent):
         return False
-    on_object = max(ranking.clusters, key=lambda h: h.object_score)
-    far = float(rotation_angle_deg(arm.transform[:3, :3], on_object.transform[:3, :3])) > MOVED_DEG
-    return far and on_object.object_score - arm.object_score >= settings.moved_margin
+    near = [h.object_score for h in ranking.scored if priors.near_arm(h.transform, extent)]
+    return ranking.best.object_score - max(near, default=-math.inf) >= settings.moved_margin
 
 
 def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray,
                       runner_up_poses: np.ndarray, cloud_voxel_size: float,
-                      settings: VerificationSettings = VerificationSettings()) -> DepthRefinement | None:
+                      settings: VerificationSettings = VerificationSettings(),
+                      confidence: np.ndarray | None = None) -> DepthRefinement | None:
     """Choose the poses (N, 4, 4, anchor's optical frame) of views with depth among every source's hypotheses, and
     their runner-ups; ``poses`` and ``runner_up_poses`` are the diffusion's answers and runner-ups (NaN where none),
-    which views without depth keep. None when the anchor shows no object depth."""
+    which views without depth keep, and ``confidence`` (N,) the solver's in each answer (the anchor's 1; None: no
+    confidence, the diffusion answer gets no prior). None when the anchor shows no object depth."""
     poses = np.asarray(poses, dtype=np.float64)
     anchor = view_data(views[0], masks[0], None)
     if anchor.evidence is None:
@@ -143,11 +160,14 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
                 if np.all(np.isfinite(diffusion)):
                     seeds[k, option] = depth_seed(diffusion, data[0].centre, item.centre)
     with_depth = [k for k, item in enumerate(data) if item.evidence is not None]
+    trust_in = np.zeros(len(views)) if confidence is None else np.asarray(confidence, np.float64)
     rankings = {}
     for target, source in itertools.combinations(with_depth, 2):
-        hypotheses = pair_hypotheses(views, data, seeds, target, source, extent, settings)
+        priors = pair_priors(views, seeds, trust_in, target, source, settings)
+        hypotheses = pair_hypotheses(views, data, seeds, target, source, extent, settings, priors.arm)
         pair = prepare_pair(data[source].cloud.points, data[target].cloud.points, voxel, extent)
-        rankings[(target, source)] = rank_pair(data[target].evidence, data[source].evidence, pair, hypotheses)
+        rankings[(target, source)] = rank_pair(data[target].evidence, data[source].evidence, pair, hypotheses,
+                                               priors)
     chosen = choose_poses([item.evidence for item in data], rankings, extent, voxel)
     current = poses.copy()
     runners = np.array(runner_up_poses, dtype=np.float64)
@@ -166,7 +186,7 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
         note = ("" if not ambiguous else f"runner-up within {pick.margin:.2f} of the best"
                 if pick.margin < settings.ambiguity_margin else f"the views disagree by {loop:.0f} deg")
         reports.append(ViewRefinement(True, note, fitness, rmse, rotation, translation, pick.source.value,
-                                      pick.margin, ambiguous, object_moved(rankings[(0, k)], settings), loop))
+                                      pick.margin, ambiguous, object_moved(rankings[(0, k)], extent, settings), loop))
     kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and not reports[k].ambiguous)]
     cloud = fused_cloud([data[k].cloud for k in kept], [current[k] for k in kept], cloud_voxel_size)
     return DepthRefinement(poses=current, views=reports, cloud=cloud, voxel_size=voxel, runner_up_poses=runners)

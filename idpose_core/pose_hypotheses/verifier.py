@@ -1,12 +1,14 @@
 """The verifier: how well two views' depth agrees under a relative pose, in both directions.
 
 Each view's points are placed in the other camera and projected into its depth image. A point that lands on the
-other view's observed surface, inside the matching region, supports the pose; one that lands in front of the
-observed surface lies in space the other camera saw empty and counts against it; one behind it is hidden and says
-nothing. Points on the surface whose colour matches the other view's pixel add colour support. Two regions are
-checked: the object itself, and the object with its surroundings (the table patch and whatever stands near it,
-``CONTEXT_EXTENTS`` object sizes around its centre). The object alone cannot tell a wrong turn that lays the two
-views' visible sides onto each other from the right pose; its surroundings can, as long as they stood still.
+other view's observed surface, inside the matching region, supports the pose; one that lands in front of every
+surface observed around its pixel lies in space the other camera saw empty and counts against it (the
+neighbourhood keeps a point on an outline, a pixel off the silhouette, from counting as free space); one behind it
+is hidden and says nothing. Points on the surface whose colour matches the other view's pixel add colour support.
+Two regions are checked: the object itself, and the object with its surroundings (the table patch and whatever
+stands near it, ``CONTEXT_EXTENTS`` object sizes around its centre). The object alone cannot tell a wrong turn that
+lays the two views' visible sides onto each other from the right pose; its surroundings can, as long as they stood
+still.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ MASK_GROWTH_PX = 3  # px the object mask is grown by: its edge is eroded before 
 CONTEXT_EXTENTS = 2.0  # the surroundings checked: points within this many object extents of its centre
 CHROMA_TOLERANCE = 0.06  # largest difference in chromaticity (r, g over r + g + b) for colours to agree
 FREE_SPACE_WEIGHT = 4.0  # a point in seen-empty space costs this many supporting points
+FREE_SPACE_WINDOW_PX = 2  # px around a pixel whose nearest reading a point must lie in front of to be in free space
 COLOUR_WEIGHT = 0.5  # weight of the colour-agreeing share
 
 
@@ -37,11 +40,13 @@ class Region:
 
 @dataclass(frozen=True)
 class ViewEvidence:
-    """What the verifier needs of one view: ``depth`` (H, W) m (0 = no reading), ``intrinsics`` K (3, 3), the
+    """What the verifier needs of one view: ``depth`` (H, W) m (0 = no reading), ``nearest`` (H, W) m: the
+    nearest reading within ``FREE_SPACE_WINDOW_PX`` of each pixel (0 = none), ``intrinsics`` K (3, 3), the
     ``chroma`` (H, W, 2) of its colour image, the object's ``centre`` (3,) in its optical frame, and two regions:
     the ``object`` and its ``context``."""
 
     depth: np.ndarray
+    nearest: np.ndarray
     intrinsics: np.ndarray
     chroma: np.ndarray
     centre: np.ndarray
@@ -82,6 +87,13 @@ def chromaticity(rgb: np.ndarray) -> np.ndarray:
     return values[..., :2] / np.maximum(values.sum(axis=-1, keepdims=True), 1.0)
 
 
+def nearest_reading(depth: np.ndarray, radius: int) -> np.ndarray:
+    """(H, W) m: the smallest non-zero reading of ``depth`` (H, W) within ``radius`` px of each pixel (0 = none)."""
+    readings = np.where(depth > 0, depth, np.inf).astype(np.float32)
+    nearest = cv2.erode(readings, np.ones((2 * radius + 1,) * 2, np.uint8), borderType=cv2.BORDER_REPLICATE)
+    return np.where(np.isfinite(nearest), nearest, 0.0)
+
+
 def _region(mask: np.ndarray, points: np.ndarray, chroma: np.ndarray, rng: np.random.Generator) -> Region:
     inside = np.flatnonzero(mask.ravel())
     if len(inside) > MAX_POINTS:
@@ -98,9 +110,9 @@ def view_evidence(points: np.ndarray, valid: np.ndarray, intrinsics: np.ndarray,
     grown = cv2.dilate(np.asarray(mask, np.uint8), np.ones((2 * MASK_GROWTH_PX + 1,) * 2, np.uint8)).astype(bool)
     near = valid & (np.linalg.norm(points - centre, axis=-1) <= CONTEXT_EXTENTS * extent)
     rng = np.random.default_rng(seed)
-    return ViewEvidence(depth, np.asarray(intrinsics, dtype=np.float64), chroma, np.asarray(centre, np.float64),
-                        _region(grown & valid, points, chroma, rng), _region(near | (grown & valid), points, chroma,
-                                                                             rng))
+    return ViewEvidence(depth, nearest_reading(depth, FREE_SPACE_WINDOW_PX), np.asarray(intrinsics, dtype=np.float64),
+                        chroma, np.asarray(centre, np.float64), _region(grown & valid, points, chroma, rng),
+                        _region(near | (grown & valid), points, chroma, rng))
 
 
 def one_way(points: np.ndarray, chroma: np.ndarray, target: ViewEvidence, region: np.ndarray,
@@ -127,7 +139,7 @@ def one_way(points: np.ndarray, chroma: np.ndarray, target: ViewEvidence, region
     reach = np.linalg.norm(placed[inside][read] - target.centre, axis=1)
     tolerance = np.maximum(np.maximum(SURFACE_SHARE * observed, tolerance_floor), ANGLE_SLACK * reach)
     supported = (np.abs(z - observed) <= tolerance) & region[v, u]
-    free = z < observed - tolerance
+    free = z < target.nearest[v, u] - tolerance
     agreeing = supported & (np.abs(chroma - target.chroma[v, u]).max(axis=1) <= CHROMA_TOLERANCE)
     count = float(len(z))
     return Agreement(supported.sum() / count, free.sum() / count, agreeing.sum() / count)

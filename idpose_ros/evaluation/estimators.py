@@ -80,7 +80,8 @@ class EstimatorOptions:
         if not low <= self.image_size <= high:
             raise ValueError(f"--image-size must be in [{low}, {high}] pixels, got {self.image_size}")
         return {**values, "image_size": self.image_size, "depth_refinement": self.depth_refinement,
-                "depth_poses": self.depth_poses, "cloud_voxel_size": NODE_DEFAULTS["cloud_voxel_size"],
+                "depth_poses": self.depth_poses, "diffusion_trust": NODE_DEFAULTS["diffusion_trust"],
+                "cloud_voxel_size": NODE_DEFAULTS["cloud_voxel_size"],
                 **{name: NODE_DEFAULTS[name] for name in NEXT_VIEW_PARAMETERS}}
 
 

@@ -19,6 +19,7 @@ from idpose_core.gravity import IMU_WINDOW_S, rotation_from_extrinsic
 from idpose_core.model_loading import PRECISIONS
 from idpose_core.next_view import CRITERIA, ReachableSet
 from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, DEPTH_POSES, MODEL_IMAGE_SIZE, PipelineSettings
+from idpose_core.pose_hypotheses import VerificationSettings
 from idpose_core.solver import SolverConfig
 from idpose_core.solver.config import KNOWN_POLAR_MODES, PRESETS, VARIANTS
 from idpose_core.stamps import INPUT_TOLERANCE_S
@@ -82,6 +83,10 @@ class NodeSettings:
         "how depth sets the poses: verify (hypotheses from registration, gravity, the arm and the diffusion "
         "estimate, chosen by one verifier on the views' depth) or refine (the diffusion estimate refined by "
         "registration, within a trust region)", choices=DEPTH_POSES))
+    diffusion_trust: float = field(default=0.0, metadata=_spec(
+        "with depth_poses verify, the head start a pose near the diffusion answer gets before the verifier scores it, "
+        "times the solver's confidence (0: the diffusion answer is one hypothesis among the others, as it should "
+        "be with the embedded demo model on an object it never saw)", bounds=(0.0, 5.0)))
     cloud_voxel_size: float = field(default=0.005, metadata=_spec(
         "voxel (m) the published object cloud is thinned to", bounds=(0.0005, 0.5)))
     anchor_frame: str = field(default="", metadata=_spec(
@@ -244,7 +249,8 @@ def pipeline_settings(values: dict[str, Any]) -> PipelineSettings:
     refinement and where the next view may stand."""
     return PipelineSettings(solver_config(values), values["object_distance"], values["image_size"],
                             values["depth_refinement"], values["cloud_voxel_size"], reachable_set(values),
-                            values["next_view_criterion"], values["depth_poses"])
+                            values["next_view_criterion"], values["depth_poses"],
+                            VerificationSettings(diffusion_trust=values["diffusion_trust"]))
 
 
 def node_settings(values: dict[str, Any]) -> NodeSettings:
