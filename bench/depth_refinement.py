@@ -45,11 +45,11 @@ from tqdm import tqdm
 from bench.result_files import result_path
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import refine_with_depth
-from idpose_core.depth_segmentation import backproject
 from idpose_core.metrics import rotation_angle_deg
 from idpose_core.model_loading import load_predictor
 from idpose_core.pipeline import PipelineSettings, estimate_view_poses
 from idpose_core.preprocessing import foreground_mask, mask_iou
+from idpose_core.segmentation import backproject
 from idpose_core.solver import SolverConfig
 from idpose_core.solver.config import PRESETS
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects

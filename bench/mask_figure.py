@@ -24,8 +24,8 @@ import numpy as np  # noqa: E402
 
 from bench.result_files import result_path  # noqa: E402
 from bench.tabletop import iou, tabletop_views  # noqa: E402
-from idpose_core.depth_segmentation import depth_cut  # noqa: E402
 from idpose_core.preprocessing import grabcut_mask  # noqa: E402
+from idpose_core.segmentation import depth_cut  # noqa: E402
 from idpose_ros.dataset.synthetic_bag import SyntheticBagOptions, make_bag  # noqa: E402
 
 OUT = result_path("tabletop", "masks_before_after.png")

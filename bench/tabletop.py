@@ -37,10 +37,10 @@ import numpy as np  # noqa: E402 (after the path setup)
 import torch  # noqa: E402
 
 from bench.result_files import result_path  # noqa: E402
-from idpose_core.depth_segmentation import backproject, depth_cut, object_distance  # noqa: E402
 from idpose_core.evaluation.protocol import EvaluationProtocol
 from idpose_core.metrics import aggregate  # noqa: E402
 from idpose_core.preprocessing import grabcut_mask  # noqa: E402
+from idpose_core.segmentation import backproject, depth_cut, object_distance  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
 from idpose_core.view_input import ViewInput  # noqa: E402
 from idpose_ros.dataset.synthetic_bag import (

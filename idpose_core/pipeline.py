@@ -18,13 +18,13 @@ import torch
 
 from idpose_core.cameras import anchor_frame_poses
 from idpose_core.depth_fusion import DepthRefinement, ObjectFrame, ViewRefinement, object_frame, refine_with_depth
-from idpose_core.depth_segmentation import DepthSegmentationError, object_distance
 from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, with_roll
 from idpose_core.next_view import NextView, ReachableSet, pose_spheres, suggest_next_view, view_spheres
 from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.pose_hypotheses import VerificationSettings, verify_with_depth
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
+from idpose_core.segmentation import DepthSegmentationError, object_distance
 from idpose_core.solver import Progress, SampleCount, SolverConfig, SolverResult, estimate_poses
 from idpose_core.view_input import ViewInput
 

@@ -2,7 +2,7 @@
 
 The foreground mask of a view comes from the most trusted source it has: an external segmentation
 ``mask``, else its alpha channel, else its depth image (the object standing on its support plane,
-``idpose_core.depth_segmentation``, boundary settled by GrabCut), else its background colour when the
+``idpose_core.segmentation``, boundary settled by GrabCut), else its background colour when the
 image border is near-uniform (thresholding), else OpenCV GrabCut seeded with the pixels whose colours
 are least like the border's, weighted towards the image centre (a cluttered photo is assumed to have
 the object roughly in the middle). One square window serves the whole set (the largest mask bounding
@@ -22,8 +22,8 @@ import numpy as np
 import torch
 
 from idpose_core.cancellation import raise_if_cancelled
-from idpose_core.depth_segmentation import DepthSegmentationError, depth_cut
 from idpose_core.grabcut import grabcut_object
+from idpose_core.segmentation import DepthSegmentationError, depth_cut
 from idpose_core.view_input import ViewInput, ViewInputError
 
 WHITE = (255, 255, 255)
@@ -37,6 +37,7 @@ GRABCUT_SIDE = 320  # GrabCut works on the view scaled to this longer side
 GRABCUT_ITERATIONS = 5
 BORDER_COLOURS = 8  # k-means clusters summarising the border's colours
 CENTRE_SIGMA = 1.0 / 3.0  # centre prior width, as a fraction of the image side
+WINDOW_SCALE = 1.5  # the square window around the object, as a multiple of its box's larger side
 SURE_OBJECT_SCORE = 0.5  # seed score (of the maximum) above which a pixel is surely object
 SURE_OBJECT_SHARE = 0.002  # of the pixels: fewer sure-object seeds than this and nothing stands out (noise)
 # The plausibility rule for an object mask (``check_object_mask``): Zero-1-to-3 compares whole objects
@@ -246,7 +247,7 @@ def precheck_view(view: ViewInput, name: str = "view 0") -> None:
         check_object_mask(mask, "alpha", name)
 
 
-def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: float = 1.5,
+def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: float = WINDOW_SCALE,
                      cancel: threading.Event | None = None) -> PreprocessedViews:
     """N views -> ``PreprocessedViews`` of (N, 3, size, size): masked to white, one window for all, resized.
 

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from idpose_core.depth_segmentation import DepthSegmentationError, backproject, depth_cut, object_distance
 from idpose_core.preprocessing import foreground_mask
+from idpose_core.segmentation import DepthSegmentationError, backproject, depth_cut, object_distance
 from idpose_core.synthetic.robot_views import pinhole_intrinsics
 from idpose_core.view_input import ViewInput
 
@@ -279,7 +279,7 @@ def test_a_toy_table_with_one_leg_in_sight_stands_and_stays_apart_from_a_box_beh
 def test_a_surface_seen_at_a_grazing_angle_is_one_piece_and_a_step_between_two_surfaces_is_not():
     """The table seen nearly edge on: each row lies 3-14 % farther than the one below it, more than a depth jump,
     yet the steps continue one another. A box's front 8 cm before a wall: one step, unlike those either side."""
-    from idpose_core.depth_segmentation import DEPTH_JUMP, _slanted
+    from idpose_core.segmentation.pieces import DEPTH_JUMP, _slanted
 
     grazing = math.radians(3.0)
     up = np.array([0.0, -math.cos(grazing), -math.sin(grazing)])
@@ -297,7 +297,7 @@ def test_a_surface_seen_at_a_grazing_angle_is_one_piece_and_a_step_between_two_s
 def test_grabcut_keeps_a_thin_leg_of_the_depth_seed_coloured_like_the_background():
     """A 4 px leg under a block, the leg the colour of the wall behind it: GrabCut's colours alone would take it
     away (the leg is thinner than the margin it may trim), the depth seed keeps it."""
-    from idpose_core.depth_segmentation import grabcut_refine
+    from idpose_core.segmentation import grabcut_refine
 
     rgb = np.full((SIZE, SIZE, 3), (40, 60, 200), np.uint8)  # a blue wall
     seed = np.zeros((SIZE, SIZE), bool)
@@ -325,7 +325,7 @@ def test_a_toy_table_seen_level_with_its_top_keeps_the_top_and_its_legs():
 def test_a_thin_leg_goes_to_the_part_it_hangs_from_not_to_the_nearest():
     """A leg hanging from a top, its foot a few pixels from a box that it does not touch: grown along the piece, the
     leg joins the top (by straight-line distance its foot would go to the box, and the top would not stand)."""
-    from idpose_core.depth_segmentation import _grown
+    from idpose_core.segmentation.touching import _grown
 
     seeds = np.zeros((60, 60), np.int32)
     seeds[5:10, 5:40] = 1  # the top
@@ -342,7 +342,7 @@ def test_a_wall_facing_the_camera_is_not_taken_for_a_table_seen_steeply():
     nearly face on: the wall holds four times the table's readings, but the table, tilted towards the image top as
     a table is, shares none of them with it and stays the support plane (the wall won while a flatter plane won on
     the count alone)."""
-    from idpose_core.depth_segmentation import support_plane
+    from idpose_core.segmentation import support_plane
 
     tilt = math.radians(15.0)
     up = np.array([0.0, -math.cos(tilt), -math.sin(tilt)])
@@ -393,14 +393,14 @@ def test_a_shadow_without_readings_between_an_object_and_the_wall_behind_keeps_t
     """A stereo camera reads nothing in a 2 px band beside an object's edge, on the wall behind it: the holes are
     closed into the pieces with their nearest reading's depth, so the jump between object and wall stays (the
     band once bridged them into one piece)."""
-    from idpose_core.depth_segmentation import _nearest_index, _pieces
+    from idpose_core.segmentation.pieces import connected_pieces, nearest_index
 
     depth = np.full((SIZE, SIZE), 1.2, np.float32)  # the wall
     depth[60:100, 60:100] = 0.5  # the object before it
     depth[58:60, 58:102] = depth[100:102, 58:102] = 0.0  # its shadow: no readings
     depth[58:102, 58:60] = depth[58:102, 100:102] = 0.0
     valid = depth > 0
-    count, labels = _pieces(np.ones((SIZE, SIZE), bool) & valid, depth, valid, _nearest_index(valid))
+    count, labels = connected_pieces(np.ones((SIZE, SIZE), bool) & valid, depth, valid, nearest_index(valid))
     assert len(np.unique(labels[valid])) == 2
     assert labels[80, 80] != labels[10, 10]
     assert labels[59, 80] == labels[80, 80], "the shadow's row beside the object is closed into it"
@@ -409,7 +409,7 @@ def test_a_shadow_without_readings_between_an_object_and_the_wall_behind_keeps_t
 def test_grabcut_reaches_through_a_surface_without_readings_by_its_colour():
     """A box's front has depth, its top, seen at a grazing angle, none: GrabCut's band reaches through the unread
     top and takes it where its colour is the box's, not the unread background beside it."""
-    from idpose_core.depth_segmentation import grabcut_refine
+    from idpose_core.segmentation import grabcut_refine
 
     rgb = np.full((SIZE, SIZE, 3), (40, 60, 200), np.uint8)  # a blue wall
     rgb[::8] = (30, 50, 170)

@@ -14,13 +14,13 @@ from scipy.spatial.transform import Rotation
 
 from idpose_core.cameras import pinhole_camera_matrix
 from idpose_core.depth_fusion import view_cloud
-from idpose_core.depth_segmentation import backproject, object_centre
 from idpose_core.metrics import rotation_angle_deg
 from idpose_core.pose_hypotheses import Source, VerificationSettings, verify_with_depth
 from idpose_core.pose_hypotheses.hypothesis import same_pose
 from idpose_core.pose_hypotheses.pair import ARM_PRIOR, ARM_TOLERANCE_DEG, DIFFUSION_TOLERANCE_DEG, Priors
 from idpose_core.pose_hypotheses.sources import arm_hypotheses, arm_pose, gravity_hypotheses
 from idpose_core.pose_hypotheses.verifier import nearest_reading, one_way, verify, view_evidence
+from idpose_core.segmentation import backproject, object_centre
 from idpose_core.synthetic.scenes import demo_objects
 from idpose_core.synthetic.tabletop import TabletopRenderer, challenge_camera, random_layout
 from idpose_core.view_input import ViewInput

@@ -1,8 +1,7 @@
-"""scripts/train_demo_model.py end to end at toy size: renders, trains, resumes, writes the model folder."""
+"""scripts/train_demo_model.py end to end at toy size: renders, trains, resumes, writes the model folder; and the
+schedule and loss of its library, ``idpose_core.demo_model.training``."""
 from __future__ import annotations
 
-import argparse
-import importlib.util
 import json
 import subprocess
 import sys
@@ -13,6 +12,9 @@ import pytest
 import torch
 
 from idpose_core.demo_model import DemoDiffusionModel, DemoModelConfig, DemoPredictor
+from idpose_core.demo_model.training import TrainingOptions
+from idpose_core.demo_model.training.loss import WRONG_POLAR, training_loss, wrong_poses
+from idpose_core.demo_model.training.schedules import robot_share_at
 from idpose_core.synthetic.scenes import demo_objects
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "train_demo_model.py"
@@ -25,13 +27,6 @@ TOY = ["--threads", "1", "--train-views", "3", "--heldout-views", "3", "--image-
 def train(work: Path, out: Path, steps: int, *extra: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, str(SCRIPT), "--work-dir", str(work), "--out", str(out),
                            "--max-steps", str(steps), *TOY, *extra], capture_output=True, text=True, timeout=600)
-
-
-def load_script():
-    spec = importlib.util.spec_from_file_location("train_demo_model", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.mark.slow
@@ -98,26 +93,23 @@ def test_robot_crops_come_in_after_the_clean_start_and_are_recorded(tmp_path):
 
 def test_the_robot_share_grows_after_the_clean_start():
     """0 during the clean start, then linear up to the chosen share, then held."""
-    module = load_script()
-    args = argparse.Namespace(robot_share=0.6, robot_from=0.2, robot_ramp=0.4)
-    shares = [module.robot_share_at(progress, args) for progress in (0.0, 0.2, 0.4, 0.6, 0.9)]
+    options = TrainingOptions(robot_share=0.6, robot_from=0.2, robot_ramp=0.4)
+    shares = [robot_share_at(progress, options) for progress in (0.0, 0.2, 0.4, 0.6, 0.9)]
     assert shares == pytest.approx([0.0, 0.0, 0.3, 0.6, 0.6])
 
 
 def test_wrong_poses_turn_the_azimuth_at_least_30_degrees():
-    module = load_script()
     pose = torch.tensor([[0.2, 6.0, 0.0]]).repeat(500, 1)
-    wrong = module.wrong_poses(pose, np.random.default_rng(0))
+    wrong = wrong_poses(pose, np.random.default_rng(0))
     turn = torch.remainder(wrong[:, 1] - pose[:, 1], 2 * np.pi)
     assert float(turn.min()) >= np.pi / 6 - 1e-5 and float(turn.max()) <= 11 * np.pi / 6 + 1e-5
-    assert float((wrong[:, 0] - pose[:, 0]).abs().max()) <= module.WRONG_POLAR + 1e-6
+    assert float((wrong[:, 0] - pose[:, 0]).abs().max()) <= WRONG_POLAR + 1e-6
     assert torch.equal(wrong[:, 2], pose[:, 2])
 
 
 def test_the_ranking_loss_adds_a_hinge_on_the_wrong_pose_error():
     """With weight 0 the loss is the denoising MSE alone; with a weight it adds a non-negative hinge, and the
     gradient reaches the model through the wrong pose's prediction too."""
-    module = load_script()
     torch.manual_seed(0)
     model = DemoDiffusionModel(DemoModelConfig(resolution=16, block_out_channels=(8, 16), norm_num_groups=4,
                                                embedding_dim=16, encoder_layers=1, encoder_heads=2,
@@ -126,9 +118,9 @@ def test_the_ranking_loss_adds_a_hinge_on_the_wrong_pose_error():
     pose = torch.tensor([[0.0, 0.5, 0.0], [0.1, 2.0, 0.0]])
     t = torch.tensor([500, 800])
     torch.manual_seed(1)
-    plain, denoising = module.training_loss(model, reference, target, pose, pose, t, 0.0, 0.2)
+    plain, denoising = training_loss(model, reference, target, pose, pose, t, 0.0, 0.2)
     assert torch.equal(plain, denoising)
     torch.manual_seed(1)
-    ranked, same = module.training_loss(model, reference, target, pose, pose, t, 1.0, 0.2)
+    ranked, same = training_loss(model, reference, target, pose, pose, t, 1.0, 0.2)
     torch.testing.assert_close(same, denoising)
     torch.testing.assert_close(ranked - same, torch.tensor(0.2))  # the wrong pose is the true one: no gap at all

@@ -19,7 +19,7 @@ import torch
 from tqdm import tqdm
 
 from idpose_core.demo_model.robot_crops import CropAugmentation, Tone, random_tone, robot_crop
-from idpose_core.preprocessing import PreprocessingError, check_object_mask, preprocess_views
+from idpose_core.preprocessing import WINDOW_SCALE, PreprocessingError, check_object_mask, preprocess_views
 from idpose_core.spherical import relative
 from idpose_core.synthetic.scenes import (
     CAMERA_POLAR_DEG,
@@ -181,7 +181,7 @@ class PairBatch:
 
 def make_pairs(views: RenderedViews, object_index: np.ndarray, reference_index: np.ndarray,
                target_index: np.ndarray, downsample: Callable[[torch.Tensor], torch.Tensor],
-               window_scales: np.ndarray | float = 1.5, crops: RobotCrops | None = None,
+               window_scales: np.ndarray | float = WINDOW_SCALE, crops: RobotCrops | None = None,
                rng: np.random.Generator | None = None, robot: np.ndarray | None = None) -> PairBatch:
     """Preprocess each pair as a two-view set (``preprocess_views``) and downsample to model size; with
     ``crops``, the pairs that ``robot`` (bool per pair, default all) marks are first made a robot's crops

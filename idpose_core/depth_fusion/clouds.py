@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import small_gicp
 
-from idpose_core.depth_segmentation import backproject
+from idpose_core.segmentation import backproject
 from idpose_core.view_input import ViewInput
 
 EDGE_EROSION_PX = 2  # px taken off the mask's edge: readings there mix object and background (flying pixels)

@@ -19,8 +19,8 @@ from scipy.spatial.transform import Rotation
 
 from idpose_core.depth_fusion.clouds import ObjectCloud, fused_cloud, view_cloud
 from idpose_core.depth_fusion.registration import POLISH, SCHEDULES, Registration, register
-from idpose_core.depth_segmentation import DepthSegmentationError, object_centre
 from idpose_core.metrics import rotation_angle_deg
+from idpose_core.segmentation import DepthSegmentationError, object_centre
 from idpose_core.view_input import ViewInput
 
 VOXEL_SHARE = 1.0 / 40.0  # of the anchor cloud's extent: the registration's voxel, so any object size works alike

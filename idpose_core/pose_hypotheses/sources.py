@@ -11,9 +11,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from idpose_core.depth_segmentation import Plane
 from idpose_core.gravity import level_from_optical, rz
 from idpose_core.pose_hypotheses.hypothesis import FAR_STAGES, NEAR_STAGES, Hypothesis, Source
+from idpose_core.segmentation import Plane
 
 YAW_STEPS = 72  # gravity: yaw candidates about the vertical (every 5 deg)
 SLIDE_ROUNDS = 8  # gravity: rounds of the sideways slide that lays the object clouds together

@@ -25,12 +25,12 @@ from idpose_core.depth_fusion.refinement import (
     pose_change,
 )
 from idpose_core.depth_fusion.registration import alignment_quality
-from idpose_core.depth_segmentation import DepthSegmentationError, Plane, backproject, object_centre, support_plane
 from idpose_core.pose_hypotheses.chain import choose_poses
 from idpose_core.pose_hypotheses.hypothesis import FAR_STAGES, Hypothesis, Source
 from idpose_core.pose_hypotheses.pair import PairRanking, Priors, prepare_pair, rank_pair
 from idpose_core.pose_hypotheses.sources import arm_hypotheses, arm_pose, gravity_hypotheses, registration_hypotheses
 from idpose_core.pose_hypotheses.verifier import ViewEvidence, view_evidence
+from idpose_core.segmentation import DepthSegmentationError, Plane, backproject, object_centre, support_plane
 from idpose_core.view_input import ViewInput
 
 ALL_SOURCES = frozenset(Source)
