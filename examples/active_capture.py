@@ -62,7 +62,11 @@ class SimulatedArm:
         image = array_to_image(np.dstack([rgb, (mask * 255).astype(np.uint8)]), "rgba8", header)
         pose = PoseStamped(header=Header(frame_id="world", stamp=header.stamp), pose=matrix_to_pose(world_from_camera))
         while True:
-            self.poses.publish(pose)
+            # The pose goes first, a few times (the node takes it best effort): a view takes gravity only from a
+            # pose topic that is live when it is kept.
+            for _ in range(3):
+                self.poses.publish(pose)
+                rclpy.spin_once(self.node, timeout_sec=0.05)
             self.images.publish(image)
             rclpy.spin_once(self.node, timeout_sec=0.1)
             future = self.capture.call_async(Trigger.Request())
