@@ -134,7 +134,7 @@ def result_message(result: PipelineResult, headers: Sequence[Header], frame_id: 
         next_view_reason=result.next_view.reason)
 
 
-def result_details(result: EstimatePoses.Result) -> dict[str, Any]:
+def action_result_details(result: EstimatePoses.Result) -> dict[str, Any]:
     """What ``idpose_core.pipeline.result_details`` gives for the same estimate (its angles and distances
     rounded to the message's float32)."""
     views = [ViewReport(view.mask_method, view.mask_note, _none_if_nan(view.roll_deg), _none_if_nan(view.polar_deg),
@@ -154,4 +154,4 @@ def view_set_estimate(result: EstimatePoses.Result) -> ViewSetEstimate:
     return ViewSetEstimate(poses=np.stack([pose_to_matrix(pose) for pose in result.poses.poses]),
                            scores=np.array([view.score for view in others], dtype=np.float64),
                            ambiguous=np.array([view.ambiguous for view in others], dtype=bool),
-                           seconds=float(result.seconds), details=result_details(result), cloud=cloud)
+                           seconds=float(result.seconds), details=action_result_details(result), cloud=cloud)

@@ -1,6 +1,6 @@
 """bench/step_cost.py on the tiny architecture writes what unit_costs and the projections read.
 
-Reduced: tiny Zero-1-to-3 config, 64 px, one alternation, one timed step; the figures themselves
+Reduced: tiny Zero-1-to-3 config, 32 px, one alternation, one timed step; the figures themselves
 mean nothing at this size, only their presence, consistency and the projection arithmetic do.
 """
 import json
@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("step_cost") / "step_cost.json"
-    subprocess.run([sys.executable, "bench/step_cost.py", "--config", "tiny", "--size", "64", "--alternations", "1",
+    subprocess.run([sys.executable, "bench/step_cost.py", "--config", "tiny", "--size", "32", "--alternations", "1",
                     "--repeats", "1", "--threads", "1", "--out", str(out)], cwd=ROOT, check=True, capture_output=True)
     return out
 

@@ -7,19 +7,25 @@ nothing here checks accuracy.
 from __future__ import annotations
 
 import math
+import sys
 import time
+import types
 from typing import Any
 
 import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from node_harness import TIMEOUT, ActionProbe, header, mixed_encodings
+from rclpy.lifecycle import LifecycleNode, LifecyclePublisher
 from sensor_msgs.msg import Image
 
 from idpose_core.solver import SolverConfig
 from idpose_interfaces.action import EstimatePoses
+from idpose_ros.node.result_publisher import RESULT_QOS
+from idpose_ros.node.tf_broadcast import PoseBroadcaster
 from msg_adapters import pose_to_matrix
 
 pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
@@ -199,6 +205,28 @@ def test_the_lifecycle_walked_with_autostart_off(node, object_views):
     assert transition(h, change, Transition.TRANSITION_ACTIVE_SHUTDOWN) and state() == "finalized"
 
 
+def test_results_publish_only_while_active_and_stay_latched(node, object_views, wait_for, tf2_msgs):
+    """The result topics and /tf are lifecycle publishers, on from activate to deactivate; /diagnostics is plain
+    (it reports every state). The last result stays latched: a subscriber that joins while inactive gets it."""
+    h, action = node(autostart=False)
+    change, _ = lifecycle(h)
+    managed = {p.topic_name.rsplit("/", 1)[1]: p for p in h.node.publishers if isinstance(p, LifecyclePublisher)}
+    assert set(managed) == {"poses", "markers", "views", "object_cloud", "object_pose", "next_view", "tf"}
+    assert any(p.topic_name == "/diagnostics" and not isinstance(p, LifecyclePublisher) for p in h.node.publishers)
+    assert transition(h, change, Transition.TRANSITION_CONFIGURE)
+    assert not any(p.is_activated for p in managed.values()), "inactive: nothing published"
+    assert transition(h, change, Transition.TRANSITION_ACTIVATE)
+    assert all(p.is_activated for p in managed.values())
+    _, result = action.run(image_messages(object_views)[:2])
+    assert result.error_code == Result.SUCCEEDED
+    assert transition(h, change, Transition.TRANSITION_DEACTIVATE)
+    assert not any(p.is_activated for p in managed.values())
+    late: list[PoseArray] = []
+    h.probe.create_subscription(PoseArray, "idpose_estimator/poses", late.append, RESULT_QOS)
+    assert wait_for(lambda: late, "the latched poses, the node inactive") == [result.poses]
+    assert h.poses == [result.poses], "published once, while active"
+
+
 def test_deactivate_cancels_a_running_goal(node, object_views):
     h, action = node(**LONG_RUN)
     change, _ = lifecycle(h)
@@ -224,3 +252,28 @@ def test_each_estimate_is_broadcast_on_tf(node, object_views, tf2_msgs):
     for transform, pose in zip(message.transforms, [*result.poses.poses, result.next_view.pose]):
         assert transform.header == result.poses.header, "in the anchor frame, at the anchor's stamp"
         assert (transform.transform.translation.x, transform.transform.rotation) == (pose.position.x, pose.orientation)
+
+
+def test_tf2_ros_sends_only_while_active(ros_context, monkeypatch):
+    """tf2_ros's broadcaster publishes through a plain publisher of its own: its sends pass only while the node is
+    active, as a lifecycle publisher's (a stand-in tf2_ros records them)."""
+    sent: list[list[Any]] = []
+    monkeypatch.setitem(sys.modules, "tf2_ros", types.SimpleNamespace(
+        TransformBroadcaster=lambda node: types.SimpleNamespace(sendTransform=sent.append)))
+    node = LifecycleNode("tf_gate", context=ros_context)
+    broadcaster = PoseBroadcaster(node, print)
+
+    def broadcast() -> None:
+        broadcaster.broadcast(PoseArray(header=header("anchor", 1), poses=[Pose()]), "p_", PoseStamped())
+
+    broadcast()
+    node.trigger_configure()
+    broadcast()
+    assert broadcaster.backend == "tf2_ros" and sent == [], "not active: nothing sent"
+    node.trigger_activate()
+    broadcast()
+    assert [[transform.child_frame_id for transform in sent[0]]] == [["p_view_0", "p_next_view"]]
+    node.trigger_deactivate()
+    broadcast()
+    assert len(sent) == 1
+    node.destroy_node()

@@ -17,8 +17,8 @@ import numpy as np
 from idpose_core.evaluation.estimator import ViewSetEstimate, ViewSetEstimator
 from idpose_core.model_loading import load_predictor
 from idpose_core.noise_predictor import NoisePredictor
-from idpose_core.pipeline import MODEL_IMAGE_SIZE, estimate_view_poses, result_details, view_crops
-from idpose_core.solver import Progress, SolverConfig
+from idpose_core.pipeline import LEVEL_POLAR_DEG, estimate_view_poses, result_details, view_crops
+from idpose_core.solver import Progress
 from idpose_core.view_input import ViewInput
 from idpose_ros.evaluation.replay import ReplayEstimator
 from idpose_ros.node.parameters import (
@@ -26,6 +26,7 @@ from idpose_ros.node.parameters import (
     SOLVER_PARAMETERS,
     parameter_table,
     pipeline_settings,
+    preset_values,
     solver_config,
 )
 
@@ -41,18 +42,19 @@ class EstimatorOptions:
     ``solver_params`` are ``NAME=VALUE`` overrides of the node's solver parameters; ``node`` and
     ``timeout`` apply to ``mode="replay"`` (a running node's name, or None to start one here);
     ``depth_refinement`` False keeps the diffusion poses of views with depth, and ``depth_poses`` says how depth
-    sets them (the node's parameters).
+    sets them (the node's parameters). Options that are node parameters default to the node's defaults;
+    ``ReplayEstimator`` takes its options from here and has no defaults of its own.
     """
 
     mode: str = "offline"
-    model_path: str = ""
-    device: str = "auto"
-    precision: str = "auto"
+    model_path: str = NODE_DEFAULTS["model_path"]
+    device: str = NODE_DEFAULTS["device"]
+    precision: str = NODE_DEFAULTS["precision"]
     preset: str = "default"
     variant: str | None = None
     solver_params: tuple[str, ...] = ()
-    image_size: int = MODEL_IMAGE_SIZE
-    depth_refinement: bool = True
+    image_size: int = NODE_DEFAULTS["image_size"]
+    depth_refinement: bool = NODE_DEFAULTS["depth_refinement"]
     depth_poses: str = NODE_DEFAULTS["depth_poses"]
     node: str | None = None
     timeout: float = 3600.0
@@ -61,8 +63,7 @@ class EstimatorOptions:
         """The node's parameter values that shape an estimate: the solver's (the preset, the variant and
         the overrides), ``image_size``, the depth refinement's and the next view's (the node's defaults); both
         modes run on exactly these. ValueError names a bad one."""
-        config = SolverConfig.preset(self.preset)
-        values = {"preset": self.preset, **{name: getattr(config, name) for name in SOLVER_PARAMETERS}}
+        values = {"preset": self.preset, **preset_values(self.preset)}
         if self.variant is not None:
             values["variant"] = self.variant
         for item in self.solver_params:
@@ -75,7 +76,7 @@ class EstimatorOptions:
                 values[name] = kind(text)
             except ValueError:
                 raise ValueError(f"--solver-param {item!r}: {name} takes a {kind.__name__}") from None
-        solver_config({**values, "anchor_polar_deg": 90.0}).validate()
+        solver_config({**values, "anchor_polar_deg": LEVEL_POLAR_DEG}).validate()
         low, high = NODE_BOUNDS["image_size"]
         if not low <= self.image_size <= high:
             raise ValueError(f"--image-size must be in [{low}, {high}] pixels, got {self.image_size}")

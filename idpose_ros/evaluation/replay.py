@@ -74,11 +74,11 @@ def as_sent(view: ViewInput, stamp: TimeMsg) -> ViewMessages:
 class ReplayEstimator:
     """A ``ViewSetEstimator`` that goes through the estimator node's action; call ``close()`` when done."""
 
-    def __init__(self, values: dict[str, Any], model_path: str = "", device: str = "auto",
-                 precision: str = "auto", node_name: str | None = None, timeout: float = 3600.0,
-                 preset: str = "default", predictor: NoisePredictor | None = None):
-        """``values``: the node parameters every estimate runs on (``preset`` names where they came from);
-        ``predictor``: the model a node started here runs, instead of the one the model parameters name."""
+    def __init__(self, values: dict[str, Any], *, model_path: str, device: str, precision: str,
+                 node_name: str | None, timeout: float, preset: str, predictor: NoisePredictor | None = None):
+        """``values``: the node parameters every estimate runs on (``preset`` names where they came from); the other
+        options come from ``EstimatorOptions`` (``make_estimator``), whose defaults are the only ones; ``predictor``:
+        the model a node started here runs, instead of the one the model parameters name."""
         self.values, self.timeout = values, timeout
         self._context = rclpy.Context()
         rclpy.init(context=self._context)

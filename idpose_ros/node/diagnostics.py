@@ -7,23 +7,25 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 from idpose_core.pipeline import PipelineResult
+from idpose_ros.node.lifecycle import Lifecycle
+from idpose_ros.node.run_state import RunPhase
 
 STATUS_NAME = "idpose_estimator: estimation"
 
 
 @dataclass(frozen=True)
 class EstimatorStatus:
-    """What the node reports: ``lifecycle`` its lifecycle state; ``state`` a ``RunPhase`` value: idle,
+    """What the node reports: ``lifecycle`` its lifecycle state; ``state`` its ``RunPhase``: idle,
     estimating, cancelling (a cancelled estimate is stopping) or failed; ``run_id`` numbers the running or the
     last estimate (0 before the first), as ``~/estimate`` answered it; ``model`` as ``ModelHolder.describe``;
     ``images_received`` counts every image message."""
 
-    state: str
+    state: RunPhase
     run_id: int
     views_buffered: int
     max_views: int
     model: str
-    lifecycle: str = "active"
+    lifecycle: Lifecycle = Lifecycle.ACTIVE
     images_received: int = 0
     stage: str = ""
     progress_percent: float = 0.0
@@ -37,17 +39,17 @@ class EstimatorStatus:
 
 def level(status: EstimatorStatus) -> bytes:
     """ERROR when the last estimate or the model load failed, WARN when the recording stopped, OK otherwise."""
-    if status.state == "failed":
+    if status.state == RunPhase.FAILED:
         return DiagnosticStatus.ERROR
     return DiagnosticStatus.WARN if status.recording.get("recording", "").startswith("error") else DiagnosticStatus.OK
 
 
 def summary(status: EstimatorStatus) -> str:
-    if status.lifecycle != "active" and status.state != "failed":
+    if status.lifecycle != Lifecycle.ACTIVE and status.state != RunPhase.FAILED:
         return f"{status.lifecycle}, {status.views_buffered} views buffered"
-    if status.state == "estimating":
+    if status.state == RunPhase.ESTIMATING:
         return f"{status.state}: {status.stage} {status.progress_percent:.0f} %"
-    if status.state == "failed":
+    if status.state == RunPhase.FAILED:
         return f"failed: {status.last_error}"
     return f"{status.state}, {status.views_buffered} views buffered"
 
@@ -55,8 +57,8 @@ def summary(status: EstimatorStatus) -> str:
 def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> DiagnosticArray:
     """One DiagnosticStatus with the state, progress, buffer, model, last run and per-view scores."""
     values = {
-        "lifecycle": status.lifecycle,
-        "state": status.state,
+        "lifecycle": str(status.lifecycle),
+        "state": str(status.state),
         "run_id": str(status.run_id),
         "stage": status.stage,
         "progress_percent": f"{status.progress_percent:.1f}",

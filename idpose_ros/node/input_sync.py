@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 from collections import deque
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
@@ -28,7 +29,15 @@ from idpose_core.gravity import (
 from idpose_core.stamps import INPUT_TOLERANCE_S, match_stamps
 from msg_adapters import imu_acceleration, orientation_rotation, stamp_nanoseconds
 
-GRAVITY_MODES = ("off", "auto", "required")
+
+class GravityMode(StrEnum):
+    """Whether views take gravity from the imu and camera orientation topics (the ``gravity`` parameter's choices)."""
+
+    OFF = "off"  # not subscribed
+    AUTO = "auto"  # when those topics publish
+    REQUIRED = "required"  # a view without a gravity reading is refused
+
+
 IMAGE_INPUTS = ("depth", "mask")
 IMAGE_HISTORY = 30  # depth / mask messages kept (a second at 30 Hz)
 IMU_HISTORY = 8000  # accelerometer readings kept (20 s at 400 Hz)
@@ -65,11 +74,12 @@ class InputSync:
     ``active_ns``: a topic counts as live while its last message is younger than this.
     """
 
-    def __init__(self, gravity: str = "auto", optical_from_imu: np.ndarray | None = None,
+    def __init__(self, gravity: str = GravityMode.AUTO, optical_from_imu: np.ndarray | None = None,
                  imu_window: float = IMU_WINDOW_S, tolerance: float = INPUT_TOLERANCE_S, active: float = 5.0) -> None:
-        if gravity not in GRAVITY_MODES:
-            raise ValueError(f"gravity must be one of {', '.join(GRAVITY_MODES)}, got {gravity!r}")
-        self.gravity = gravity
+        try:
+            self.gravity = GravityMode(gravity)
+        except ValueError:
+            raise ValueError(f"gravity must be one of {', '.join(GravityMode)}, got {gravity!r}") from None
         self.optical_from_imu = np.eye(3) if optical_from_imu is None else np.asarray(optical_from_imu, float)
         self.imu_window, self.tolerance = int(imu_window * 1e9), int(tolerance * 1e9)
         self.active = int(active * 1e9)
@@ -158,7 +168,7 @@ class InputSync:
         if info is not None and (info.width, info.height) != size:
             info = None
         up, problem, source = None, "", ()
-        if self.gravity == "required" or (self.gravity == "auto" and live & {"imu", "orientation"}):
+        if self.gravity is GravityMode.REQUIRED or (self.gravity is GravityMode.AUTO and live & {"imu", "orientation"}):
             try:
                 up, source = self.gravity_reading(stamp)
             except GravityUnavailable as err:

@@ -9,6 +9,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 from idpose_core.solver import Progress
@@ -18,12 +19,20 @@ Job = Callable[[Progress, threading.Event], Any]
 LOG_EVERY_PERCENT = 10
 
 
+class JobStatus(StrEnum):
+    """How a job ended; a cancel request wins over a job that raised or finished meanwhile."""
+
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+
 @dataclass(frozen=True)
 class Outcome:
-    """How a job ended: ``status`` is "succeeded", "failed" or "cancelled"."""
+    """How a job ended (``status``), after how many seconds, with its value or its error."""
 
     task: str
-    status: str
+    status: JobStatus
     seconds: float
     value: Any = None
     error: str = ""
@@ -117,5 +126,5 @@ class JobRunner:
             self._progress = None
             if cancel.is_set():
                 value, error = None, "cancelled"
-        status = "cancelled" if cancel.is_set() else "failed" if error else "succeeded"
+        status = JobStatus.CANCELLED if cancel.is_set() else JobStatus.FAILED if error else JobStatus.SUCCEEDED
         on_done(Outcome(task, status, time.monotonic() - started, value, error))

@@ -1,12 +1,14 @@
 """The estimator's ROS parameters: one table with descriptions, ranges and choices, and their checks.
 
-Solver parameters carry ``SolverConfig``'s field names and defaults, so the node and the
-solver cannot drift apart; ``SolverConfig.validate`` has the last word on combinations.
+Solver parameters carry ``SolverConfig``'s field names and defaults, and the node's parameters that shape an
+estimate take their defaults from ``PipelineSettings``, ``ReachableSet`` and ``VerificationSettings``, so the node
+and the core cannot drift apart; ``SolverConfig.validate`` has the last word on combinations.
 """
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -18,13 +20,13 @@ from idpose_core.devices import DEVICE_CHOICES
 from idpose_core.gravity import IMU_WINDOW_S, rotation_from_extrinsic
 from idpose_core.model_loading import PRECISIONS
 from idpose_core.next_view import CRITERIA, ReachableSet
-from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, DEPTH_POSES, MODEL_IMAGE_SIZE, PipelineSettings
+from idpose_core.pipeline import ANCHOR_POLAR_RANGE_DEG, DEPTH_POSES, LEVEL_POLAR_DEG, PipelineSettings
 from idpose_core.pose_hypotheses import VerificationSettings
 from idpose_core.solver import SolverConfig
 from idpose_core.solver.config import KNOWN_POLAR_MODES, PRESETS, VARIANTS
 from idpose_core.stamps import INPUT_TOLERANCE_S
-from idpose_ros.node.input_sync import GRAVITY_MODES
-from idpose_ros.node.view_buffer import CAPTURE_MODES
+from idpose_ros.node.input_sync import GravityMode
+from idpose_ros.node.view_buffer import CaptureMode
 
 INT32_MAX = 2**31 - 1
 
@@ -32,6 +34,11 @@ INT32_MAX = 2**31 - 1
 def _spec(description: str, *, choices: tuple[str, ...] = (), bounds: tuple[float, float] | None = None,
           read_only: bool = False) -> dict[str, Any]:
     return {"description": description, "choices": choices, "bounds": bounds, "read_only": read_only}
+
+
+def _choices(kind: type[StrEnum]) -> tuple[str, ...]:
+    """The values of an enum: the choices of the parameter that takes it."""
+    return tuple(member.value for member in kind)
 
 
 @dataclass(frozen=True)
@@ -53,9 +60,9 @@ class NodeSettings:
     autostart: bool = field(default=True, metadata=_spec(
         "walk the lifecycle to active (configure, activate) when the node starts; false: wait for a lifecycle "
         "manager", read_only=True))
-    capture_mode: str = field(default="auto", metadata=_spec(
+    capture_mode: CaptureMode = field(default=CaptureMode.AUTO, metadata=_spec(
         "auto: keep every image min_view_interval s after the last kept one; on_request: ~/capture keeps "
-        "the latest image", choices=CAPTURE_MODES))
+        "the latest image", choices=_choices(CaptureMode)))
     min_view_interval: float = field(default=1.0, metadata=_spec(
         "seconds between two views kept in auto capture mode", bounds=(0.0, 3600.0)))
     max_views: int = field(default=8, metadata=_spec(
@@ -67,27 +74,27 @@ class NodeSettings:
     max_image_pixels: int = field(default=4096 * 4096, metadata=_spec(
         "largest image accepted, in pixels (width x height), read from the header before decoding; larger "
         "images are refused", bounds=(32 * 32, 2**28)))
-    anchor_polar_deg: float = field(default=90.0, metadata=_spec(
+    anchor_polar_deg: float = field(default=LEVEL_POLAR_DEG, metadata=_spec(
         "polar angle of the anchor camera around the object (deg from world up +z; 90 = level), "
         "turns relative spherical poses into SE(3) and narrows the polar search", bounds=ANCHOR_POLAR_RANGE_DEG))
-    object_distance: float = field(default=1.0, metadata=_spec(
+    object_distance: float = field(default=PipelineSettings.object_distance, metadata=_spec(
         "anchor camera to object centre (m): the metric scale of the published positions",
         bounds=(0.001, 1000.0)))
-    image_size: int = field(default=MODEL_IMAGE_SIZE, metadata=_spec(
+    image_size: int = field(default=PipelineSettings.image_size, metadata=_spec(
         "side in pixels of the preprocessed views the model sees (Zero-1-to-3: 256)", bounds=(16, 1024)))
-    depth_refinement: bool = field(default=True, metadata=_spec(
+    depth_refinement: bool = field(default=PipelineSettings.depth_refinement, metadata=_spec(
         "refine the poses of views with depth and intrinsics by registering their object points onto the "
         "anchor's (metric 6-DoF poses, gated per view), and publish the fused object on ~/object_cloud and "
         "~/object_pose"))
-    depth_poses: str = field(default="verify", metadata=_spec(
+    depth_poses: str = field(default=PipelineSettings.depth_poses, metadata=_spec(
         "how depth sets the poses: verify (hypotheses from registration, gravity, the arm and the diffusion "
         "estimate, chosen by one verifier on the views' depth) or refine (the diffusion estimate refined by "
         "registration, within a trust region)", choices=DEPTH_POSES))
-    diffusion_trust: float = field(default=0.0, metadata=_spec(
+    diffusion_trust: float = field(default=VerificationSettings.diffusion_trust, metadata=_spec(
         "with depth_poses verify, the head start a pose near the diffusion answer gets before the verifier scores it, "
         "times the solver's confidence (0: the diffusion answer is one hypothesis among the others, as it should "
         "be with the embedded demo model on an object it never saw)", bounds=(0.0, 5.0)))
-    cloud_voxel_size: float = field(default=0.005, metadata=_spec(
+    cloud_voxel_size: float = field(default=PipelineSettings.cloud_voxel_size, metadata=_spec(
         "voxel (m) the published object cloud is thinned to", bounds=(0.0005, 0.5)))
     anchor_frame: str = field(default="", metadata=_spec(
         "frame_id of the published poses; empty = the anchor image's header.frame_id"))
@@ -98,10 +105,10 @@ class NodeSettings:
         "prefix of the TF child frames of the estimated cameras"))
     diagnostics_period: float = field(default=1.0, metadata=_spec(
         "seconds between two /diagnostics messages", bounds=(0.05, 60.0), read_only=True))
-    gravity: str = field(default="auto", metadata=_spec(
+    gravity: GravityMode = field(default=GravityMode.AUTO, metadata=_spec(
         "each view's roll and elevation from the imu or camera_orientation/camera_pose topics: off, auto (when "
         "they publish), required (a view without a gravity reading within input_tolerance is refused)",
-        choices=GRAVITY_MODES, read_only=True))
+        choices=_choices(GravityMode), read_only=True))
     imu_to_optical: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 1.0], metadata=_spec(
         "rotation from the imu topic's frame to the camera's optical frame: a quaternion x y z w, or roll pitch "
         "yaw in radians (a RealSense accel or imu topic: 0 0 0 1)", read_only=True))
@@ -121,17 +128,17 @@ class NodeSettings:
     record_max_bytes: int = field(default=2_000_000_000, metadata=_spec(
         "size at which the recording rotates to a new file (which starts with the buffered views)",
         bounds=(1_000_000, 2**40), read_only=True))
-    next_view_polar_deg: list[float] = field(default_factory=lambda: [30.0, 100.0], metadata=_spec(
+    next_view_polar_deg: list[float] = field(default_factory=lambda: list(ReachableSet.polar_deg), metadata=_spec(
         "polar angles (deg from up, low high) the next suggested camera may take: what the arm reaches"))
-    next_view_azimuth_deg: list[float] = field(default_factory=lambda: [-180.0, 180.0], metadata=_spec(
+    next_view_azimuth_deg: list[float] = field(default_factory=lambda: list(ReachableSet.azimuth_deg), metadata=_spec(
         "azimuths (deg from the anchor camera's, counter-clockwise seen from above, low high) the next suggested "
         "camera may take"))
-    next_view_distance: list[float] = field(default_factory=lambda: [0.1, 3.0], metadata=_spec(
+    next_view_distance: list[float] = field(default_factory=lambda: list(ReachableSet.distance), metadata=_spec(
         "distances (m, low high) the next camera may stand from the object; it stands at the anchor's, clipped "
         "into them"))
-    next_view_step_deg: float = field(default=10.0, metadata=_spec(
+    next_view_step_deg: float = field(default=ReachableSet.step_deg, metadata=_spec(
         "grid step (deg) of the candidate cameras the next view is chosen from", bounds=(1.0, 90.0)))
-    next_view_criterion: str = field(default="bridge", metadata=_spec(
+    next_view_criterion: str = field(default=PipelineSettings.next_view_criterion, metadata=_spec(
         "how the next view is chosen when a view is ambiguous: bridge (a camera that links the trusted views to "
         "the ambiguous one under one hypothesis only) or contrast (a camera much nearer one hypothesis); with "
         "nothing ambiguous, the camera farthest from every view", choices=tuple(CRITERIA)))
@@ -140,6 +147,11 @@ class NodeSettings:
         "solver's other settings from it (live: for gravity, else fast; ifusion: iFusion's pose search); empty = the "
         "solver parameters as set",
         choices=("", *PRESETS)))
+
+    def __post_init__(self) -> None:
+        """Parameter values arrive as plain strings: the modes become their enums."""
+        object.__setattr__(self, "capture_mode", CaptureMode(self.capture_mode))
+        object.__setattr__(self, "gravity", GravityMode(self.gravity))
 
 
 SOLVER_PARAMETERS: dict[str, dict[str, Any]] = {
@@ -284,16 +296,19 @@ def declare_parameters(node: Node) -> None:
         node.declare_parameter(name, default, descriptor(name, default, spec))
 
     def apply_preset(changes: list[Parameter]) -> None:
+        """The exposed solver parameters at the preset's values (so ``ros2 param get`` shows what runs)."""
         named = {change.name for change in changes}
         for change in changes:
             if change.name == "preset" and change.value:
-                node.set_parameters([p for p in preset_parameters(change.value) if p.name not in named])
+                node.set_parameters([Parameter(name, value=value) for name, value in preset_values(change.value).items()
+                                     if name not in named])
 
     node.add_post_set_parameters_callback(apply_preset)
     apply_preset([node.get_parameter("preset")])
 
 
-def preset_parameters(name: str) -> list[Parameter]:
-    """The exposed solver parameters at preset ``name``'s values (so ``ros2 param get`` shows what runs)."""
+def preset_values(name: str) -> dict[str, Any]:
+    """The exposed solver parameters at preset ``name``'s values: what the ``preset`` parameter, a goal's preset
+    and an evaluation's preset set. ValueError names an unknown preset."""
     config = SolverConfig.preset(name)
-    return [Parameter(field, value=getattr(config, field)) for field in SOLVER_PARAMETERS]
+    return {field: getattr(config, field) for field in SOLVER_PARAMETERS}

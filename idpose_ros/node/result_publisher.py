@@ -1,9 +1,14 @@
 """Where an estimate's result goes: ``~/poses``, ``~/markers``, ``~/views``, ``~/object_cloud``, ``~/object_pose``
-(latched), ``~/next_view`` (latched) and, when on, TF."""
+(latched), ``~/next_view`` (latched) and, when on, TF.
+
+Lifecycle publishers: they publish only while the node is active. Deactivating does not destroy them, so the
+last result stays latched: a subscriber that joins later, the node active or not, still gets it; activating
+publishes nothing again.
+"""
 from __future__ import annotations
 
 from geometry_msgs.msg import PoseArray, PoseStamped
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
@@ -21,13 +26,13 @@ RESULT_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durabil
 class ResultPublisher:
     """The node's result topics, and TF when ``publish_tf``."""
 
-    def __init__(self, node: Node, publish_tf: bool) -> None:
-        self._poses = node.create_publisher(PoseArray, "~/poses", RESULT_QOS)
-        self._markers = node.create_publisher(MarkerArray, "~/markers", RESULT_QOS)
-        self._views = node.create_publisher(Image, "~/views", RESULT_QOS)
-        self._cloud = node.create_publisher(PointCloud2, "~/object_cloud", RESULT_QOS)
-        self._object_pose = node.create_publisher(PoseStamped, "~/object_pose", RESULT_QOS)
-        self._next_view = node.create_publisher(PoseStamped, "~/next_view", RESULT_QOS)
+    def __init__(self, node: LifecycleNode, publish_tf: bool) -> None:
+        self._poses = node.create_lifecycle_publisher(PoseArray, "~/poses", RESULT_QOS)
+        self._markers = node.create_lifecycle_publisher(MarkerArray, "~/markers", RESULT_QOS)
+        self._views = node.create_lifecycle_publisher(Image, "~/views", RESULT_QOS)
+        self._cloud = node.create_lifecycle_publisher(PointCloud2, "~/object_cloud", RESULT_QOS)
+        self._object_pose = node.create_lifecycle_publisher(PoseStamped, "~/object_pose", RESULT_QOS)
+        self._next_view = node.create_lifecycle_publisher(PoseStamped, "~/next_view", RESULT_QOS)
         self._tf = PoseBroadcaster(node, node.get_logger().warning) if publish_tf else None
 
     def publish(self, result: PipelineResult, message: EstimatePoses.Result, tf_prefix: str) -> None:

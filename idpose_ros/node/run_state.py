@@ -30,6 +30,17 @@ class RunPhase(StrEnum):
         return self in (RunPhase.ESTIMATING, RunPhase.CANCELLING)
 
 
+class CancelCause(StrEnum):
+    """What cancelled an estimate: the log, the cancelled result's message and the recording's cancel event name
+    it by the value."""
+
+    CANCEL = "~/cancel"
+    RESET = "~/reset"  # the views are dropped too
+    GOAL = "an EstimatePoses cancel"
+    DEACTIVATE = "deactivate"
+    SHUTDOWN = "shutdown"
+
+
 @dataclass(frozen=True)
 class LastResult:
     """What the last published result said: its seconds, per-view scores and ambiguity, and what it read off its
@@ -58,7 +69,7 @@ class RunState:
         self._lock = threading.Lock()
         self._phase = RunPhase.IDLE
         self._run_id = 0
-        self._cancelled_by = ""  # "~/cancel", "~/reset", an action cancel, "deactivate", "shutdown"
+        self._cancelled_by: CancelCause | None = None
         self._last_error = ""
         self._last = LastResult()
 
@@ -72,8 +83,8 @@ class RunState:
             return self._run_id
 
     @property
-    def cancelled_by(self) -> str:
-        """What cancelled the current (or last cancelled) run."""
+    def cancelled_by(self) -> CancelCause | None:
+        """What cancelled the current (or last cancelled) run; None before the first cancel."""
         with self._lock:
             return self._cancelled_by
 
@@ -93,7 +104,7 @@ class RunState:
             raise EstimateRefused(Result.BUSY, refusal)
         return run
 
-    def cancel(self, cause: str, stop: Callable[[], bool]) -> int | None:
+    def cancel(self, cause: CancelCause, stop: Callable[[], bool]) -> int | None:
         """Mark the running estimate cancelled by ``cause`` if ``stop()`` (asking the worker) succeeds; its run id,
         or None when no estimate is running."""
         with self._lock:

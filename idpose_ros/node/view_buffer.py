@@ -7,6 +7,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum
 
 from builtin_interfaces.msg import Time
 
@@ -27,7 +28,11 @@ class View:
     received: ViewMessages | None = None  # the messages it was made from, kept while the node records
 
 
-CAPTURE_MODES = ("auto", "on_request")  # keep views on a timer, or on ~/capture
+class CaptureMode(StrEnum):
+    """How images become views (the ``capture_mode`` parameter's choices)."""
+
+    AUTO = "auto"  # the image that arrives min_view_interval s after the last kept view
+    ON_REQUEST = "on_request"  # the latest image, on ~/capture
 
 
 class CaptureRefused(Exception):

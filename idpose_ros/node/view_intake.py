@@ -18,10 +18,10 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Imu, RegionOfInt
 
 from idpose_core.preprocessing import PreprocessingError, precheck_view
 from idpose_ros.node.flight_recorder import FlightRecorder, subscribe_tf
-from idpose_ros.node.input_sync import IMAGE_INPUTS, InputSync
-from idpose_ros.node.parameters import NodeSettings
+from idpose_ros.node.input_sync import IMAGE_INPUTS, GravityMode, InputSync
+from idpose_ros.node.node_state import NodeState
 from idpose_ros.node.raw_image import RawImage
-from idpose_ros.node.view_buffer import CaptureRefused, ImageRefused, View, ViewBuffer
+from idpose_ros.node.view_buffer import CaptureMode, CaptureRefused, ImageRefused, View, ViewBuffer
 from idpose_ros.view_decoding import ViewMessages, with_inputs
 from msg_adapters import AdapterError, ImageTooLarge, pose_to_matrix, stamp_nanoseconds
 
@@ -50,15 +50,14 @@ def arm_pose(gravity_source: tuple) -> np.ndarray | None:
 class ViewIntake:
     """The node's subscriptions to images and their inputs, and the one way an image becomes a view (``prepare``).
 
-    ``settings`` gives the node's current settings, ``active`` whether images are taken now, ``on_kept(count)``
+    ``state`` says whether images are taken now (active) and the node's current settings; ``on_kept(count)``
     hears of every view kept (``count`` views are then buffered).
     """
 
-    def __init__(self, node: LifecycleNode, buffer: ViewBuffer, sync: InputSync, recorder: FlightRecorder,
-                 settings: Callable[[], NodeSettings], active: Callable[[], bool],
-                 on_kept: Callable[[int], None]) -> None:
-        self._node, self._buffer, self.sync, self._recorder = node, buffer, sync, recorder
-        self._settings, self._active, self._on_kept = settings, active, on_kept
+    def __init__(self, node: LifecycleNode, state: NodeState, buffer: ViewBuffer, sync: InputSync,
+                 recorder: FlightRecorder, on_kept: Callable[[int], None]) -> None:
+        self._node, self._state, self._buffer, self.sync, self._recorder = node, state, buffer, sync, recorder
+        self._on_kept = on_kept
         self._logger = node.get_logger()
         self._roi: tuple[int, int, int, int] | None = None  # the latest region of interest, for views kept later
         self.images_received = 0  # counted by the image callbacks only (one callback group)
@@ -76,7 +75,7 @@ class ViewIntake:
                                      qos_profile_sensor_data, callback_group=inputs)
         node.create_subscription(CameraInfo, "camera_info", self.sync.add_camera_info, qos_profile_sensor_data,
                                  callback_group=inputs)
-        if self.sync.gravity != "off":
+        if self.sync.gravity is not GravityMode.OFF:
             node.create_subscription(Imu, "imu", self._on_imu, IMU_QOS, callback_group=inputs)
             for kind, topic in ((QuaternionStamped, "camera_orientation"), (PoseStamped, "camera_pose")):
                 node.create_subscription(kind, topic, self._on_orientation, qos_profile_sensor_data,
@@ -103,12 +102,12 @@ class ViewIntake:
         """
         name = f"{image.source} on {image.topic}"
         try:
-            pixels = image.decode(self._settings().max_image_pixels)
+            pixels = image.decode(self._state.settings.max_image_pixels)
             height, width = pixels.rgb.shape[:2]
             now = self._node.get_clock().now().nanoseconds
             matched = self.sync.match(stamp_nanoseconds(image.stamp), (width, height), now)
             if matched.gravity_problem:
-                if self.sync.gravity == "required":
+                if self.sync.gravity is GravityMode.REQUIRED:
                     raise ImageRefused(f"{name}: no gravity reading for it ({matched.gravity_problem}; gravity: "
                                        "required)")
                 self._logger.warning(f"{name}: kept without gravity ({matched.gravity_problem})",
@@ -134,12 +133,12 @@ class ViewIntake:
 
     def _on_message(self, image: RawImage) -> None:
         """Remember the image undecoded; in auto mode, keep it as a view when one is due. Ignored unless active."""
-        if not self._active():
+        if not self._state.active:
             return
         self.images_received += 1
         self._buffer.observe(image)
-        settings = self._settings()
-        if settings.capture_mode != "auto" or not self._buffer.due(self._now(), settings.min_view_interval):
+        settings = self._state.settings
+        if settings.capture_mode != CaptureMode.AUTO or not self._buffer.due(self._now(), settings.min_view_interval):
             return
         try:
             view, count = self._buffer.keep_latest(self.prepare, self._now())
