@@ -12,8 +12,6 @@ from xml.etree import ElementTree
 
 import pytest
 
-pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
-
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = ROOT / "launch" / "estimator.launch.py"
 
@@ -59,6 +57,7 @@ def test_the_launch_file_takes_the_documented_arguments_and_remaps_both_image_to
     assert "estimator.yaml" in ast.unparse(module), "the default params file is the installed config"
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_colcon_installs_the_launch_file(workspace):
     installed = workspace / "install" / "idpose_ros" / "share" / "idpose_ros" / "launch" / LAUNCH_FILE.name
     assert installed.read_text() == LAUNCH_FILE.read_text()
@@ -94,6 +93,7 @@ def test_the_large_image_profile_enlarges_shared_memory_and_keeps_udp():
     assert participant.findtext(".//dds:useBuiltinTransports", namespaces=namespace) == "false"
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_colcon_installs_the_transport_profile(workspace):
     installed = workspace / "install" / "idpose_ros" / "share" / "idpose_ros" / "config" / "fastdds_large_images.xml"
     assert installed.read_text() == (ROOT / "config" / "fastdds_large_images.xml").read_text()

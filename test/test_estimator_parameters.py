@@ -21,8 +21,6 @@ from idpose_ros.node.parameters import (
     solver_config,
 )
 
-pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
-
 ROOT = Path(__file__).resolve().parents[1]
 READ_ONLY = {"model_path", "device", "precision", "load_model_at_startup", "autostart", "publish_tf",
              "diagnostics_period", "gravity", "imu_to_optical", "imu_window", "input_tolerance",
@@ -42,6 +40,7 @@ def test_the_shipped_yaml_lists_every_parameter_with_its_default():
     assert shipped == {name: default for name, default, _ in parameter_table()}
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_solver_parameters_default_to_the_solver_defaults_and_build_its_config(node):
     values = {name: node.get_parameter(name).value for name, _, _ in parameter_table()}
     config = solver_config(values)
@@ -51,6 +50,7 @@ def test_solver_parameters_default_to_the_solver_defaults_and_build_its_config(n
     config.validate()
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_every_parameter_is_described_and_bounded_where_numeric(node):
     for name, _, _ in parameter_table():
         (descriptor,) = node.describe_parameters([name])
@@ -80,6 +80,7 @@ def test_every_parameter_is_described_and_bounded_where_numeric(node):
     ("device", "cuda", "read-only"),
     ("max_views", "eight", "type"),
 ])
+@pytest.mark.slow  # starts a node or a process
 def test_invalid_changes_are_rejected_with_a_reason(node, name, value, reason):
     before = node.get_parameter(name).value
     (result,) = node.set_parameters([Parameter(name, value=value)])
@@ -88,6 +89,7 @@ def test_invalid_changes_are_rejected_with_a_reason(node, name, value, reason):
     assert node.get_parameter(name).value == before
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_valid_changes_are_taken_together(node):
     results = node.set_parameters_atomically([Parameter("max_views", value=12),
                                               Parameter("views_per_estimate", value=10),
@@ -97,6 +99,7 @@ def test_valid_changes_are_taken_together(node):
     assert values == [10, 5]
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_an_invalid_override_at_start_up_names_the_problem(ros_context):
     node = Node("bad_overrides", context=ros_context,
                 parameter_overrides=[Parameter("capture_mode", value="continuous")])
@@ -107,6 +110,7 @@ def test_an_invalid_override_at_start_up_names_the_problem(ros_context):
         node.destroy_node()
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_setting_a_preset_sets_the_exposed_solver_parameters_and_the_rest_comes_from_it(node):
     assert node.set_parameters([Parameter("preset", value="ifusion")])[0].successful
     ifusion = SolverConfig.preset("ifusion")
@@ -122,6 +126,7 @@ def test_setting_a_preset_sets_the_exposed_solver_parameters_and_the_rest_comes_
     assert not node.set_parameters([Parameter("preset", value="slow")])[0].successful
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_a_preset_given_at_start_up_sets_the_solver_parameters(ros_context):
     node = Node("preset_at_start", context=ros_context, parameter_overrides=[Parameter("preset", value="fast")])
     try:

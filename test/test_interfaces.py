@@ -12,8 +12,6 @@ import pytest
 
 from scripts import install_interfaces
 
-pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
-
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "idpose_interfaces"
 # The names and types clients rely on; the files may add fields.
@@ -73,12 +71,14 @@ def installed() -> dict:
     return json.loads(run_clean("-c", DESCRIBE, *ERROR_CODES))
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_the_installed_types_carry_every_field_clients_rely_on(installed):
     for name, fields in CONTRACT.items():
         assert {field: installed["fields"][name].get(field) for field in fields} == fields, name
     assert installed["codes"] == ERROR_CODES
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_the_installed_types_are_the_repository_s_files(installed):
     """A stale install (a .msg edited without ./run rebuilding) fails here."""
     (view,) = source_fields(PACKAGE / "msg" / "ViewEstimate.msg")
@@ -87,6 +87,7 @@ def test_the_installed_types_are_the_repository_s_files(installed):
         assert list(installed["fields"][name]) == fields, f"{name}: run ./run again to rebuild idpose_interfaces"
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_a_goal_round_trips_between_an_action_client_and_server_with_nothing_set_up():
     out = json.loads(run_clean(str(ROOT / "test" / "estimate_poses_round_trip.py")).splitlines()[-1])
     assert out["error_code"] == 0 and out["run_id"] == 7
@@ -132,6 +133,7 @@ def test_the_build_runs_on_this_python_and_links_the_extensions_to_lib(tmp_path)
     assert env["PATH"].split(":")[0] == str(Path(sys.executable).parent)
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_a_broken_interface_file_fails_the_install_naming_it(tmp_path, monkeypatch):
     for name in ("AMENT_PREFIX_PATH", "CMAKE_PREFIX_PATH"):  # the ROS wheels found here, installed elsewhere
         monkeypatch.setenv(name, sys.prefix)

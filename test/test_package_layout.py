@@ -9,16 +9,16 @@ import pytest
 from catkin_pkg.changelog import get_changelog_from_path
 from catkin_pkg.package import parse_package
 
-pytestmark = pytest.mark.slow  # every test here starts a node or a process, or takes seconds
-
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_colcon_sees_an_ament_python_package(tmp_path, colcon):
     listing = colcon("list", "--base-paths", str(ROOT), cwd=tmp_path)
     assert "idpose_ros" in listing and "(ros.ament_python)" in listing
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_ros2_run_finds_the_estimator(workspace):
     """What `ros2 run idpose_ros estimator` does: ament index -> prefix -> lib/idpose_ros/estimator."""
     script = (
@@ -36,6 +36,7 @@ def test_ros2_run_finds_the_estimator(workspace):
         p.name for p in (ROOT / "config").glob("*.yaml"))
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_colcon_sees_both_packages_and_builds_the_interfaces_first(tmp_path, colcon):
     listing = colcon("list", "--topological-order", "--base-paths", str(ROOT), str(ROOT / "idpose_interfaces"),
                      cwd=tmp_path)
@@ -43,6 +44,7 @@ def test_colcon_sees_both_packages_and_builds_the_interfaces_first(tmp_path, col
         ("idpose_interfaces", "(ros.ament_cmake)"), ("idpose_ros", "(ros.ament_python)")]
 
 
+@pytest.mark.slow  # starts a node or a process
 def test_the_workspace_command_builds_both_packages(workspace):
     """The command docs/building.md gives, as the workspace fixture ran it; the types come from the workspace."""
     command = next(line for line in (workspace / "log" / "latest_build" / "logger_all.log").read_text().splitlines()
