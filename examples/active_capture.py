@@ -14,6 +14,7 @@ the truth the arm knows.
 import argparse
 import math
 import sys
+import time
 
 import numpy as np
 import rclpy
@@ -34,6 +35,7 @@ from idpose_interfaces.action import EstimatePoses
 from msg_adapters import array_to_image, matrix_to_pose, pose_to_matrix
 
 FRAME = "camera_optical"
+SETTLE_S = 0.3  # s the arm publishes its pose before it asks ~/capture for the view
 
 
 def camera_at(polar_deg: float, azimuth_deg: float) -> np.ndarray:
@@ -62,13 +64,14 @@ class SimulatedArm:
         image = array_to_image(np.dstack([rgb, (mask * 255).astype(np.uint8)]), "rgba8", header)
         pose = PoseStamped(header=Header(frame_id="world", stamp=header.stamp), pose=matrix_to_pose(world_from_camera))
         while True:
-            # The pose goes first, a few times (the node takes it best effort): a view takes gravity only from a
-            # pose topic that is live when it is kept.
-            for _ in range(3):
-                self.poses.publish(pose)
-                rclpy.spin_once(self.node, timeout_sec=0.05)
+            self.poses.publish(pose)
             self.images.publish(image)
-            rclpy.spin_once(self.node, timeout_sec=0.1)
+            # Keep publishing the pose a moment before asking: a view takes the gravity and the pose the node holds
+            # for its stamp when it is kept, and the node may take the image before the pose.
+            settled = time.monotonic() + SETTLE_S
+            while time.monotonic() < settled:
+                self.poses.publish(pose)
+                rclpy.spin_once(self.node, timeout_sec=0.02)
             future = self.capture.call_async(Trigger.Request())
             rclpy.spin_until_future_complete(self.node, future)
             if future.result().success:

@@ -1,9 +1,9 @@
 """Shared fixtures: DDS isolation for rclpy tests, the colcon workspace, a stand-in tf2_msgs and the tiny
 Zero-1-to-3.
 
-ROS_DOMAIN_ID is drawn at random (1..200) and discovery kept on this host when pytest imports
-this file, before any test calls rclpy.init, so concurrent test runs on the machine never see
-each other's nodes; subprocesses inherit both variables. Torch gets one OpenMP thread unless
+ROS_DOMAIN_ID is drawn at random (1..190, plus the pytest-xdist worker's number) and discovery kept on
+this host when pytest imports this file, before any test calls rclpy.init, so concurrent test runs and
+workers never see each other's nodes; subprocesses inherit both variables. Torch gets one OpenMP thread unless
 OMP_NUM_THREADS says otherwise (set before torch is imported): on a busy 2-core machine, two
 threads made the tiny model's steps 7-10x slower, worst on threads other than the main one.
 """
@@ -22,7 +22,10 @@ import pytest
 
 from scripts.install_interfaces import build_environment, cmake_arguments, prepend
 
-os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 200))
+# One draw per run (pytest-xdist workers inherit it from the controller) and one domain per worker in it.
+os.environ.setdefault("IDPOSE_TEST_DOMAIN_BASE", str(random.SystemRandom().randint(1, 190)))
+WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
+os.environ["ROS_DOMAIN_ID"] = str(int(os.environ["IDPOSE_TEST_DOMAIN_BASE"]) + WORKER)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
