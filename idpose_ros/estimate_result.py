@@ -41,17 +41,17 @@ def no_pose() -> Pose:
 
 def depth_fields(refinement: ViewRefinement | None) -> dict[str, Any]:
     """A ViewEstimate's depth fields: what depth did to the view's pose (empty note and NaNs when no refinement
-    ran)."""
+    ran), as Python bools and floats (rclpy's C conversion aborts the process on a numpy bool)."""
     if refinement is None:
         return {"depth_refined": False, "depth_note": "", "depth_fitness": math.nan, "depth_inlier_rmse": math.nan,
                 "depth_rotation_change_deg": 0.0, "depth_translation_change": 0.0, "pose_source": "diffusion",
                 "verifier_margin": math.nan, "object_moved": False, "loop_residual_deg": math.nan}
-    return {"depth_refined": refinement.refined, "depth_note": refinement.note,
-            "depth_fitness": refinement.fitness, "depth_inlier_rmse": refinement.inlier_rmse,
-            "depth_rotation_change_deg": refinement.rotation_change_deg,
-            "depth_translation_change": refinement.translation_change, "pose_source": refinement.source,
-            "verifier_margin": refinement.margin, "object_moved": refinement.object_moved,
-            "loop_residual_deg": refinement.loop_residual_deg}
+    return {"depth_refined": bool(refinement.refined), "depth_note": refinement.note,
+            "depth_fitness": float(refinement.fitness), "depth_inlier_rmse": float(refinement.inlier_rmse),
+            "depth_rotation_change_deg": float(refinement.rotation_change_deg),
+            "depth_translation_change": float(refinement.translation_change), "pose_source": refinement.source,
+            "verifier_margin": float(refinement.margin), "object_moved": bool(refinement.object_moved),
+            "loop_residual_deg": float(refinement.loop_residual_deg)}
 
 
 def refinement_of(view: ViewEstimate) -> ViewRefinement | None:
@@ -70,7 +70,7 @@ def view_ambiguous(view: ViewReport, solver_ambiguous: bool) -> bool:
     """The verifier's ambiguity where it chose the view's pose (a finite margin), else the solver's."""
     refinement = view.refinement
     if refinement is not None and math.isfinite(refinement.margin):
-        return refinement.ambiguous
+        return bool(refinement.ambiguous)
     return solver_ambiguous
 
 
@@ -90,7 +90,8 @@ def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[Vi
             roll_deg=_nan_if_none(view.roll_deg), polar_deg=_nan_if_none(view.polar_deg),
             mask_method=view.mask_method, mask_note=view.mask_note,
             polar_source="gravity" if view.polar_deg is not None else "",
-            object_distance=_nan_if_none(view.distance), touches_border=view.touches_border, reliable=view.reliable,
+            object_distance=_nan_if_none(view.distance), touches_border=bool(view.touches_border),
+            reliable=bool(view.reliable),
             **depth_fields(view.refinement)))
     return estimates
 

@@ -91,7 +91,8 @@ def test_an_estimate_with_depth_publishes_the_object(harness, tabletop, wait_for
     assert other.depth_refined, "depth_poses verify: the verifier chose the pose of a view with depth"
     assert 0.0 <= other.depth_fitness <= 1.0
     assert other.pose_source in {"diffusion", "registration", "gravity"} and math.isfinite(other.verifier_margin)
-    assert other.ambiguous == (other.verifier_margin < VerificationSettings().ambiguity_margin)
+    no_gravity_margin = VerificationSettings().ambiguity_margin_without_gravity  # no view here knows gravity
+    assert other.ambiguous == (other.verifier_margin < no_gravity_margin)
     assert not other.object_moved and anchor.pose_source == "diffusion" and math.isnan(anchor.verifier_margin)
     markers = wait_for(lambda: h.markers, "the markers")[-1].markers
     (box,) = [marker for marker in markers if marker.type == Marker.CUBE]

@@ -160,6 +160,18 @@ def test_the_arms_pose_wins_and_a_moved_object_is_flagged(scene):
     assert rotation_angle_deg(moved.poses[1][:3, :3], relative_to_object) < 10.0, "the pose is the object's"
 
 
+@pytest.mark.slow
+def test_without_gravity_a_view_needs_the_larger_lead_to_be_unambiguous(scene):
+    views, masks, _, _, _ = scene
+    registration = frozenset({Source.REGISTRATION})
+    strict = VerificationSettings(sources=registration, ambiguity_margin=0.0, ambiguity_margin_without_gravity=1e6)
+    no_gravity = [dataclasses.replace(view, gravity_up=None, camera_pose=None) for view in views[:2]]
+    without = verify_with_depth(no_gravity, masks[:2], *no_diffusion(2), 0.005, strict).views[1]
+    assert without.ambiguous is True and "without gravity the best must lead by 1e+06" in without.note
+    with_gravity = [dataclasses.replace(view, camera_pose=None) for view in views[:2]]
+    assert not verify_with_depth(with_gravity, masks[:2], *no_diffusion(2), 0.005, strict).views[1].ambiguous
+
+
 def test_a_pose_near_the_arms_gets_its_prior_whatever_its_source_and_the_diffusion_answer_its_trust():
     def turned(degrees: float) -> np.ndarray:
         pose = np.eye(4)

@@ -41,12 +41,15 @@ class VerificationSettings:
     """Which ``sources`` propose poses (the diffusion's are always kept: they are what a view without depth
     gets); ``ambiguity_margin``: a view whose best pose leads the runner-up of another cluster by less is
     ambiguous, and so is one whose pose-graph loop residual exceeds ``max_loop_residual_deg`` (the views
-    disagree); ``moved_margin``: by how much a pose far from the arm's must beat it for the object to count as
-    moved; ``diffusion_trust``: the prior a pose near the diffusion answer gets, times the solver's confidence in
+    disagree); ``ambiguity_margin_without_gravity``: the lead a view needs when it or the anchor has no gravity
+    (the whole rotation group is then open, and a wrong turn of a smooth object can lead clearly);
+    ``moved_margin``: by how much a pose far from the arm's must beat it for the object to count as moved;
+    ``diffusion_trust``: the prior a pose near the diffusion answer gets, times the solver's confidence in
     it (how far the loaded model is trusted on this object: the embedded model, at chance on a novel object, 0)."""
 
     sources: frozenset[Source] = ALL_SOURCES
     ambiguity_margin: float = 0.5
+    ambiguity_margin_without_gravity: float = 2.5
     max_loop_residual_deg: float = 10.0
     moved_margin: float = 0.3
     diffusion_trust: float = 0.0
@@ -182,9 +185,15 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
         fitness, rmse = alignment_quality(data[k].cloud.points, anchor_tree, pick.pose, 2.0 * voxel)
         rotation, translation = pose_change(pick.pose, poses[k])
         loop = pick.loop_residual_deg
-        ambiguous = pick.margin < settings.ambiguity_margin or loop > settings.max_loop_residual_deg
-        note = ("" if not ambiguous else f"runner-up within {pick.margin:.2f} of the best"
-                if pick.margin < settings.ambiguity_margin else f"the views disagree by {loop:.0f} deg")
+        gravity = views[0].gravity_up is not None and views[k].gravity_up is not None
+        margin = settings.ambiguity_margin if gravity else settings.ambiguity_margin_without_gravity
+        ambiguous = bool(pick.margin < margin or loop > settings.max_loop_residual_deg)
+        note = ""
+        if pick.margin < margin:
+            note = f"runner-up within {pick.margin:.2f} of the best" + (
+                "" if gravity else f" (without gravity the best must lead by {margin:g})")
+        elif ambiguous:
+            note = f"the views disagree by {loop:.0f} deg"
         reports.append(ViewRefinement(True, note, fitness, rmse, rotation, translation, pick.source.value,
                                       pick.margin, ambiguous, object_moved(rankings[(0, k)], extent, settings), loop))
     kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and not reports[k].ambiguous)]
