@@ -64,7 +64,7 @@ def main() -> None:
         rng = np.random.default_rng(args.seed + row)
         views = [ViewInput(rgb=frame.rgb, depth=stereo_depth(frame.depth, rng), intrinsics=intrinsics,
                            gravity_up=camera[:3, :3].T @ [0.0, 0.0, 1.0]) for frame, camera in zip(frames, cameras)]
-        masks = [foreground_mask(view)[0] for view in views]
+        masks = [foreground_mask(view).mask for view in views]
         truth = np.linalg.inv(cameras[0]) @ cameras
         seed = turned_truth(truth, np.linalg.inv(cameras[0])[:3, 3], rng)
         refined = refine_with_depth(views, masks, seed, radius / 20.0)

@@ -46,7 +46,7 @@ def main() -> None:
     intrinsics = pinhole_camera_matrix(size, size, FOV)
     views = [ViewInput(rgb=f.rgb, depth=stereo_depth(f.depth, rng), intrinsics=intrinsics,
                        gravity_up=camera[:3, :3].T @ [0.0, 0.0, 1.0]) for f, camera in zip(frames, cameras)]
-    masks = [foreground_mask(view)[0] for view in views]
+    masks = [foreground_mask(view).mask for view in views]
     n = len(views)
     result = verify_with_depth(views, masks, np.tile(np.eye(4), (n, 1, 1)), np.full((n, 4, 4), math.nan), 0.005)
     world = cameras[0]  # the anchor's frame to the world (z up, the object at the origin)

@@ -142,7 +142,7 @@ def measure_scene(spec, size: str, seed: int, predictor, preset: str) -> list[di
     for depth_kind, scene_views in views.items():
         masks, ious = [], []
         for view, frame in zip(scene_views, frames):
-            mask = foreground_mask(view)[0]
+            mask = foreground_mask(view).mask
             masks.append(mask)
             ious.append(mask_iou(mask, frame.target_mask))
         base = {"object": spec.name, "size": size, "scene_seed": seed, "depth": depth_kind, "mask_iou": ious}

@@ -16,18 +16,23 @@ what makes segmentation hard:
   the target); and the same views again with a region of interest (off_centre_roi: a box around the
   target grown by 10-30 % on each side, as a detector gives); crowded: off-centre views where another
   object's centre is 15 % nearer the image centre (only a region of interest says which object the view
-  is about), without and with (crowded_roi) that box.
+  is about), without and with (crowded_roi) that box;
+- near_backdrop: a panel 0-4 cm behind the target's bounding ball, a wall it almost touches (parts of the
+  target that rise over it, such as a brick's studs seen from level, stand against the panel at a depth step).
 
-Targets are the six demo objects in turn (parts: a generated head-and-body). The mask is what the
+Targets are the six demo objects in turn, or with ``--targets heldout`` the catalogue's held-out objects (parts:
+a generated head-and-body either way). The mask is what the
 pipeline computes from the colour image, the depth and the intrinsics (``foreground_mask``: the depth
 cut, with its fallbacks), without gravity; views where under 300 target pixels, or under half of its silhouette,
 are in sight (a target hidden behind another object) are left out.
-`--depth-noise` gives the depth as a camera reads it (relative Gaussian noise, rounded to millimetres).
-Prints mean and worst IoU per row and overall (the five failure types) with the number of views, and adds the
-run (the commit measured, the seed, the noise and the table) to bench/results/mask_quality/summary.json;
-``--out FILE`` also writes every view's row there.
+`--depth-noise` gives the depth as a camera reads it (relative Gaussian noise, rounded to millimetres), `--stereo`
+as an active stereo camera does (noise growing with depth, no readings either side of an edge).
+Prints mean and worst IoU and the share of views under 0.75 per row and overall (the six failure types) with the
+number of views, and adds the run (the commit measured, the seed, the depth, the targets and the table) to
+bench/results/mask_quality/summary.json; ``--out FILE`` also writes every view's row there.
 
-    python bench/mask_quality.py [--seed 1000] [--views 8] [--size 320] [--depth-noise 0.003]
+    python bench/mask_quality.py [--seed 1000] [--views 8] [--size 320] [--depth-noise 0.003 | --stereo]
+                                 [--targets demo|heldout]
 """
 from __future__ import annotations
 
@@ -47,6 +52,7 @@ import numpy as np  # noqa: E402 (after the path setup)
 
 from bench.result_files import result_path  # noqa: E402
 from idpose_core.preprocessing import foreground_mask, mask_iou  # noqa: E402
+from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
 from idpose_core.synthetic.robot_views import pinhole_intrinsics  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
 from idpose_core.synthetic.tabletop import (  # noqa: E402
@@ -58,6 +64,7 @@ from idpose_core.synthetic.tabletop import (  # noqa: E402
     parts_target,
     random_layout,
     sensor_depth,
+    stereo_depth,
 )
 from idpose_core.view_input import ViewInput  # noqa: E402
 
@@ -65,6 +72,8 @@ FOV_DEG = 60.0
 POLAR_DEG, DISTANCE = (30.0, 82.0), (0.4, 0.75)
 MIN_VISIBLE = 300  # px of the target that must be in sight
 MIN_VISIBLE_SHARE = 0.5  # of the target's silhouette: a target mostly hidden behind another object is not in view
+ROI_STREAM = 5  # the random stream of the regions of interest (and 6 of the crowded views'): as before the
+# sixth failure type, so that the boxes stay the same
 EXTRA_ROWS = ("off_centre_roi", "crowded", "crowded_roi")  # off-centre views beside the failure types
 SUMMARY_ABOUT = ("bench/mask_quality.py runs: per run the code measured (a commit; earlier code was run from its "
                  "checkout with this bench copied in), the seed, the depth noise and the mask IoU per failure type "
@@ -72,13 +81,17 @@ SUMMARY_ABOUT = ("bench/mask_quality.py runs: per run the code measured (a commi
 
 
 def challenge_view(challenge: str, index: int, seed: int, size: int, crowded: bool = False,
-                   depth_noise: float = 0.0) -> tuple[ViewInput, np.ndarray] | None:
+                   depth_noise: float = 0.0, stereo: bool = False,
+                   targets: str = "demo") -> tuple[ViewInput, np.ndarray] | None:
     """(the view: colour, depth, intrinsics; the target's true mask) of scene ``index`` of a failure type, or
     None when too little of the target is in sight (under ``MIN_VISIBLE`` px, or under ``MIN_VISIBLE_SHARE`` of
     its silhouette: mostly hidden behind another object). ``crowded`` (off-centre only): another object nearer the
-    image centre than the target. ``depth_noise``: the depth as a camera reads it (``sensor_depth``)."""
+    image centre than the target. ``depth_noise``: the depth as a camera reads it (``sensor_depth``); ``stereo``:
+    as an active stereo camera reads it (``stereo_depth``: noise growing with depth, no readings at edges).
+    ``targets``: the demo objects in turn, or (``heldout``) the catalogue's held-out objects."""
     rng = np.random.default_rng([seed, CHALLENGES.index(challenge), index] + [1] * crowded)
-    target = parts_target(rng) if challenge == "parts" else demo_objects()[index % len(demo_objects())]
+    pool = demo_objects() if targets == "demo" else heldout_objects(*BENCH_HELDOUT)
+    target = parts_target(rng) if challenge == "parts" else pool[index % len(pool)]
     camera = None
     while camera is None:  # an off-centre view takes a new scene until a fair aim exists
         sphere = np.array([math.radians(rng.uniform(*POLAR_DEG)), rng.uniform(0.0, 2.0 * math.pi),
@@ -92,32 +105,36 @@ def challenge_view(challenge: str, index: int, seed: int, size: int, crowded: bo
         silhouette = alone.render(camera).target_mask.sum()
     if frame.target_mask.sum() < max(MIN_VISIBLE, MIN_VISIBLE_SHARE * silhouette):
         return None
-    depth = sensor_depth(frame.depth, rng, depth_noise) if depth_noise else frame.depth
+    depth = (stereo_depth(frame.depth, rng) if stereo else sensor_depth(frame.depth, rng, depth_noise) if depth_noise
+             else frame.depth)
     return ViewInput(frame.rgb, depth=depth, intrinsics=pinhole_intrinsics(size, FOV_DEG)), frame.target_mask
 
 
 def with_roi(view: ViewInput, truth: np.ndarray, seed: int, index: int, crowded: bool) -> ViewInput:
     """The view with a region of interest: a loose box around the target, as a detector would give."""
-    box = loose_box(truth, np.random.default_rng([seed, len(CHALLENGES) + int(crowded), index]))
+    box = loose_box(truth, np.random.default_rng([seed, ROI_STREAM + int(crowded), index]))
     return dataclasses.replace(view, roi=box)
 
 
 def score(view: ViewInput, truth: np.ndarray, name: str, index: int) -> dict:
     """The pipeline's mask of one view against the truth: scene index, IoU and mask method (printed)."""
-    mask, method, _ = foreground_mask(view)
-    row = {"scene": index, "iou": mask_iou(mask, truth), "method": method}
-    print(f"  {name} {index}: IoU {row['iou']:.3f} ({method})", file=sys.stderr)
+    found = foreground_mask(view)
+    row = {"scene": index, "iou": mask_iou(found.mask, truth), "method": found.method, "confidence": found.confidence}
+    print(f"  {name} {index}: IoU {row['iou']:.3f} ({found.method}, confidence {found.confidence:.2f})",
+          file=sys.stderr)
     return row
 
 
-def measure(seed: int, views: int, size: int, depth_noise: float = 0.0) -> dict:
+def measure(seed: int, views: int, size: int, depth_noise: float = 0.0, stereo: bool = False,
+            targets: str = "demo") -> dict:
     """Per failure type, and the off-centre rows with a region of interest or a crowded centre (``EXTRA_ROWS``):
-    every view's IoU and mask method."""
+    every view's IoU and mask method (``challenge_view`` for the depth and the targets)."""
     results: dict[str, list[dict]] = {}
+    depth = {"depth_noise": depth_noise, "stereo": stereo, "targets": targets}
     for challenge in CHALLENGES:
         results[challenge] = []
         for index in range(views):
-            scene = challenge_view(challenge, index, seed, size, depth_noise=depth_noise)
+            scene = challenge_view(challenge, index, seed, size, **depth)
             if scene is None:
                 continue
             view, truth = scene
@@ -126,7 +143,7 @@ def measure(seed: int, views: int, size: int, depth_noise: float = 0.0) -> dict:
                 continue
             results.setdefault("off_centre_roi", []).append(
                 score(with_roi(view, truth, seed, index, False), truth, "off_centre_roi", index))
-            crowded = challenge_view(challenge, index, seed, size, crowded=True, depth_noise=depth_noise)
+            crowded = challenge_view(challenge, index, seed, size, crowded=True, **depth)
             if crowded is not None:
                 view, truth = crowded
                 results.setdefault("crowded", []).append(score(view, truth, "crowded", index))
@@ -135,9 +152,14 @@ def measure(seed: int, views: int, size: int, depth_noise: float = 0.0) -> dict:
     return results
 
 
+LOW_IOU = 0.75  # a view under this IoU lost a large part of its object, or took in another
+
+
 def summary(rows: list[dict]) -> dict:
-    values = [row["iou"] for row in rows]
-    return {"views": len(values), "mean": float(np.mean(values)), "worst": float(np.min(values))}
+    """The number of views, mean and worst IoU, and the share of views under ``LOW_IOU``."""
+    values = np.array([row["iou"] for row in rows])
+    return {"views": len(values), "mean": float(values.mean()), "worst": float(values.min()),
+            "under_0.75": float(np.mean(values < LOW_IOU))}
 
 
 def main() -> None:
@@ -147,16 +169,21 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=320, help="image side (px)")
     parser.add_argument("--depth-noise", type=float, default=0.0,
                         help="depth noise as a share of each reading, then rounded to mm (0: exact renders)")
+    parser.add_argument("--stereo", action="store_true",
+                        help="depth as an active stereo camera reads it (noise growing with depth, holes at edges)")
+    parser.add_argument("--targets", choices=("demo", "heldout"), default="demo",
+                        help="the six demo objects, or the catalogue's held-out objects (parts: generated either way)")
     parser.add_argument("--out", type=Path, default=None, help="JSON file for every view's row (default: none)")
     args = parser.parse_args()
     started = time.monotonic()
-    results = measure(args.seed, args.views, args.size, args.depth_noise)
+    results = measure(args.seed, args.views, args.size, args.depth_noise, args.stereo, args.targets)
     table = {challenge: summary(rows) for challenge, rows in results.items() if rows}
     table["all"] = summary([row for name, rows in results.items() if name not in EXTRA_ROWS for row in rows])
-    print(f"| type (seed {args.seed}) | views | mean IoU | worst IoU |\n|---|---|---|---|")
+    print(f"| type (seed {args.seed}) | views | mean IoU | worst IoU | under {LOW_IOU} |\n|---|---|---|---|---|")
     for name, row in table.items():
-        print(f"| {name} | {row['views']} | {row['mean']:.3f} | {row['worst']:.3f} |")
-    run = {"code": measured_code(), "seed": args.seed, "depth_noise": args.depth_noise, "size": args.size,
+        print(f"| {name} | {row['views']} | {row['mean']:.3f} | {row['worst']:.3f} | {100 * row['under_0.75']:.0f} % |")
+    run = {"code": measured_code(), "seed": args.seed, "depth_noise": args.depth_noise, "stereo": args.stereo,
+           "targets": args.targets, "size": args.size,
            "summary": table, "seconds": round(time.monotonic() - started, 1)}
     summary_file = result_path("mask_quality", "summary.json")
     runs = json.loads(summary_file.read_text())["runs"] if summary_file.is_file() else []

@@ -38,6 +38,8 @@ ANCHOR_POLAR_RANGE_DEG = (1.0, 179.0)  # the anchor polar angles accepted: strai
 # outermost row or column): 2 px more allows for a mask boundary that stops a pixel or two short of the edge
 # (anti-aliasing, depth holes along the frame). Such an object is cut off, and the model compares a part.
 BORDER_MARGIN_PX = 2
+MIN_MASK_CONFIDENCE = 0.5  # a depth cut with more than half the readings along its outline attached to what it left
+# out cannot vouch for the object it kept
 DEPTH_POSES = ("verify", "refine")  # how depth sets the poses: hypotheses from every source and one verifier, or
 # only the diffusion estimate refined by registration
 
@@ -52,7 +54,8 @@ class PipelineSettings:
     among the hypotheses of every source (registration, gravity, the arm, the diffusion estimate) by one verifier
     (``idpose_core.pose_hypotheses``, with ``verification``), "refine" refines the diffusion estimate by registration
     (``idpose_core.depth_fusion``); ``reachable`` and ``next_view_criterion``: where the next camera may stand and
-    how it is chosen (``idpose_core.next_view``)."""
+    how it is chosen (``idpose_core.next_view``); ``min_mask_confidence``: a view cut by depth less confident than
+    this that its object is apart from what was left out is never reliable and stays out of the fused cloud."""
 
     solver: SolverConfig
     object_distance: float = 1.0
@@ -63,6 +66,7 @@ class PipelineSettings:
     next_view_criterion: str = "bridge"
     depth_poses: str = "verify"
     verification: VerificationSettings = VerificationSettings()
+    min_mask_confidence: float = MIN_MASK_CONFIDENCE
 
     def __post_init__(self) -> None:
         if self.depth_poses not in DEPTH_POSES:
@@ -75,8 +79,10 @@ class ViewReport:
     a more trusted source failed), its roll and polar angle from gravity and its object distance from
     depth (degrees, metres; None without gravity / depth); ``touches_border`` when the mask, in the view's
     own image, comes within ``BORDER_MARGIN_PX`` of its edge (the object is likely cut off), and
-    ``reliable`` = neither touching the border nor, for a view other than the anchor, ambiguous; ``refinement``:
-    what depth did to its pose (None when no depth refinement ran)."""
+    ``reliable`` = neither touching the border, nor cut by depth with a ``mask_confidence`` (how separable the
+    object is from what the cut left out; NaN for other mask methods) under the settings' minimum, nor, for a view
+    other than the anchor, ambiguous; ``refinement``: what depth did to its pose (None when no depth refinement
+    ran)."""
 
     mask_method: str
     mask_note: str
@@ -86,6 +92,7 @@ class ViewReport:
     touches_border: bool
     reliable: bool
     refinement: ViewRefinement | None = None
+    mask_confidence: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -134,10 +141,10 @@ def touches_border(mask: np.ndarray, margin: int = BORDER_MARGIN_PX) -> bool:
 
 
 def view_report(view: ViewInput, mask: np.ndarray, method: str, note: str, roll: float,
-                original_mask: np.ndarray) -> ViewReport:
+                original_mask: np.ndarray, mask_confidence: float, min_mask_confidence: float) -> ViewReport:
     """The view's roll, gravity polar angle and depth distance, where its inputs give them, and whether its
     mask in the original image (``original_mask``) touches the border; ``reliable`` does not know the
-    solver's ambiguity yet (``with_ambiguity`` adds it)."""
+    solver's ambiguity yet (``with_ambiguity`` adds it), only the mask's (``mask_trusted``)."""
     gravity = view.gravity_up is not None
     distance, depth_note = None, ""
     if view.depth is not None:
@@ -147,8 +154,18 @@ def view_report(view: ViewInput, mask: np.ndarray, method: str, note: str, roll:
             depth_note = f"no depth distance: {err}"
     polar = math.degrees(polar_angle(view.gravity_up, viewing_ray(view, mask))) if gravity else None
     border = touches_border(original_mask)
-    return ViewReport(method, "; ".join(filter(None, [note, depth_note])), math.degrees(roll) if gravity else None,
-                      polar, distance, touches_border=border, reliable=not border)
+    trusted = mask_trusted(mask_confidence, min_mask_confidence)
+    notes = [note, depth_note, "" if trusted else (f"the mask is unsure: confidence {mask_confidence:.2f} < "
+                                                   f"{min_mask_confidence:.2f}")]
+    return ViewReport(method, "; ".join(filter(None, notes)), math.degrees(roll) if gravity else None, polar,
+                      distance, touches_border=border, reliable=not border and trusted,
+                      mask_confidence=mask_confidence)
+
+
+def mask_trusted(confidence: float, minimum: float) -> bool:
+    """Whether a view's mask can carry a reliable pose: made by another method than depth (NaN ``confidence``), or
+    cut by depth at least ``minimum`` confident that the object is apart from what was left out."""
+    return not confidence < minimum
 
 
 def with_ambiguity(reports: Sequence[ViewReport], ambiguous: np.ndarray) -> list[ViewReport]:
@@ -201,24 +218,28 @@ def next_view_for(solved: SolverResult, polar_deg: float, distance: float, ancho
 
 
 def depth_poses(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray, runners: np.ndarray,
-                confidence: np.ndarray, settings: PipelineSettings) -> DepthRefinement | None:
+                confidence: np.ndarray, reports: Sequence[ViewReport],
+                settings: PipelineSettings) -> DepthRefinement | None:
     """The poses of views with depth as ``settings.depth_poses`` sets them, from the diffusion's ``poses``, runner-ups
-    and ``confidence`` (N,) (None with ``depth_refinement`` off or no object depth on the anchor)."""
+    and ``confidence`` (N,); a view whose mask is unsure (``reports``, ``mask_trusted``) stays out of the fused
+    cloud (None with ``depth_refinement`` off or no object depth on the anchor)."""
     if not settings.depth_refinement:
         return None
+    fuse = [mask_trusted(report.mask_confidence, settings.min_mask_confidence) for report in reports]
     if settings.depth_poses == "verify":
         return verify_with_depth(views, masks, poses, runners, settings.cloud_voxel_size, settings.verification,
-                                 confidence)
-    return refine_with_depth(views, masks, poses, settings.cloud_voxel_size)
+                                 confidence, fuse)
+    return refine_with_depth(views, masks, poses, settings.cloud_voxel_size, fuse=fuse)
 
 
-def with_refinement(report: ViewReport, refinement: ViewRefinement) -> ViewReport:
+def with_refinement(report: ViewReport, refinement: ViewRefinement, min_mask_confidence: float) -> ViewReport:
     """The report with what depth did to its pose; where the verifier chose the pose (a finite margin), its verdict
-    replaces the solver's ambiguity in ``reliable``: the pose is reliable when its mask is whole in the image, no
-    pose of another cluster scores near it and the arm's pose, if given, agrees."""
+    replaces the solver's ambiguity in ``reliable``: the pose is reliable when its mask is whole in the image and
+    trusted (``mask_trusted``), no pose of another cluster scores near it and the arm's pose, if given, agrees."""
     if not math.isfinite(refinement.margin):
         return replace(report, refinement=refinement)
-    trusted = not (report.touches_border or refinement.ambiguous or refinement.object_moved)
+    trusted = not (report.touches_border or refinement.ambiguous or refinement.object_moved) and (
+        mask_trusted(report.mask_confidence, min_mask_confidence))
     return replace(report, refinement=refinement, reliable=trusted)
 
 
@@ -239,8 +260,10 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     upright, rolls = zip(*(upright_view(view) for view in views))
     preprocessed = preprocess_views(upright, size=settings.image_size, cancel=cancel)
     masks = [original_frame_mask(mask, view, roll) for mask, view, roll in zip(preprocessed.masks, views, rolls)]
-    reports = [view_report(view, mask, method, note, roll, original) for view, mask, method, note, roll, original in
-               zip(upright, preprocessed.masks, preprocessed.mask_methods, preprocessed.mask_notes, rolls, masks)]
+    reports = [view_report(view, mask, method, note, roll, original, confidence, settings.min_mask_confidence)
+               for view, mask, method, note, roll, original, confidence in
+               zip(upright, preprocessed.masks, preprocessed.mask_methods, preprocessed.mask_notes, rolls, masks,
+                   preprocessed.mask_confidences)]
     anchor = reports[0]
     solver = settings.solver
     known_polar = None
@@ -256,10 +279,11 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
     poses = with_roll(anchor_frame_poses(solved.rel_poses, math.radians(polar_deg), distance), np.array(rolls))
     reports = with_ambiguity(reports, solved.ambiguous)
     runners = runner_up_poses(solved, polar_deg, distance, rolls)
-    depth = depth_poses(views, masks, poses, runners, np.r_[1.0, solved.confidence], settings)
+    depth = depth_poses(views, masks, poses, runners, np.r_[1.0, solved.confidence], reports, settings)
     if depth is not None:
         poses = depth.poses
-        reports = [with_refinement(report, refinement) for report, refinement in zip(reports, depth.views)]
+        reports = [with_refinement(report, refinement, settings.min_mask_confidence)
+                   for report, refinement in zip(reports, depth.views)]
         if depth.runner_up_poses is not None:  # the verifier's runner-up where it chose the pose
             runners = depth.runner_up_poses
     return PipelineResult(poses=poses, runner_up_poses=runners,

@@ -13,6 +13,7 @@ model can compare (none found, nearly the whole frame, or a speck) is refused by
 """
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -56,13 +57,15 @@ class PreprocessedViews:
     """``images`` (N, 3, size, size) float32 in [-1, 1]; ``masks`` N bool (H_i, W_i) input-resolution
     foreground masks; ``mask_methods`` N of ``MASK_METHODS``; ``mask_notes`` N of "" or why a more trusted
     source could not be used (e.g. the depth found no support plane); ``windows`` N (x, y, side) square crops
-    in input pixels (may extend past the image, padded white)."""
+    in input pixels (may extend past the image, padded white); ``mask_confidences`` N of the depth cut's confidence
+    in its mask (``ForegroundMask``; NaN for other methods)."""
 
     images: torch.Tensor
     masks: list[np.ndarray]
     mask_methods: list[str]
     mask_notes: list[str]
     windows: list[tuple[int, int, int]]
+    mask_confidences: list[float]
 
 
 def _lab(rgb: np.ndarray) -> np.ndarray:
@@ -150,28 +153,39 @@ def alpha_mask(alpha: np.ndarray | None) -> np.ndarray | None:
 MASK_METHODS = ("mask", "alpha", "depth", "threshold", "grabcut")  # most trusted first
 
 
-def foreground_mask(view: ViewInput) -> tuple[np.ndarray, str, str]:
-    """(mask (H, W) bool, method, note) from the most trusted source the view has (``MASK_METHODS``).
+@dataclass(frozen=True)
+class ForegroundMask:
+    """A view's object ``mask`` (H, W) bool, the ``method`` that made it (``MASK_METHODS``), a ``note`` (why depth,
+    when present, was not used, or what its cut is unsure of; "" otherwise) and the depth cut's ``confidence`` (how
+    separable the object is from what was left out, ``segmentation.mask_confidence``; NaN for other methods)."""
 
-    An alpha channel counts only when it marks something transparent; depth needs ``depth`` and
-    ``intrinsics``. ``note`` says why depth, when present, was not used, or what its cut is unsure of ("" otherwise).
+    mask: np.ndarray
+    method: str
+    note: str = ""
+    confidence: float = math.nan
+
+
+def foreground_mask(view: ViewInput) -> ForegroundMask:
+    """The object's mask from the most trusted source the view has (``MASK_METHODS``).
+
+    An alpha channel counts only when it marks something transparent; depth needs ``depth`` and ``intrinsics``.
     """
     if view.mask is not None:
-        return np.asarray(view.mask, dtype=bool), "mask", ""
+        return ForegroundMask(np.asarray(view.mask, dtype=bool), "mask")
     mask = alpha_mask(view.alpha)
     if mask is not None:
-        return mask, "alpha", ""
+        return ForegroundMask(mask, "alpha")
     note = ""
     if view.depth is not None:
         try:
             cut = depth_cut(view)
-            return cut.mask, "depth", cut.note
+            return ForegroundMask(cut.mask, "depth", cut.note, cut.confidence)
         except DepthSegmentationError as err:
             note = f"depth not used: {err}"
     mask = threshold_mask(view.rgb)
     if mask is not None:
-        return mask, "threshold", note
-    return grabcut_mask(view.rgb), "grabcut", note
+        return ForegroundMask(mask, "threshold", note)
+    return ForegroundMask(grabcut_mask(view.rgb), "grabcut", note)
 
 
 def on_white(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -258,15 +272,13 @@ def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: 
         raise PreprocessingError("no views to preprocess")
     if size < 1 or not window_scale > 0:
         raise PreprocessingError(f"size must be >= 1 and window_scale > 0, got {size} and {window_scale}")
-    masks, methods, notes = [], [], []
+    found = []
     for index, view in enumerate(views):
         check_view(view, f"view {index}")
         raise_if_cancelled(cancel, f"preprocessing view {index}")
-        mask, method, note = foreground_mask(view)
-        check_object_mask(mask, method, f"view {index}")
-        masks.append(mask)
-        methods.append(method)
-        notes.append(note)
+        found.append(foreground_mask(view))
+        check_object_mask(found[-1].mask, found[-1].method, f"view {index}")
+    masks = [item.mask for item in found]
     largest_side = max(max(bounding_box(mask)[2:]) for mask in masks)
     side = max(1, int(round(largest_side * window_scale)))
     windows, crops = [], []
@@ -276,4 +288,5 @@ def preprocess_views(views: Sequence[ViewInput], size: int = 256, window_scale: 
         crops.append(cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA))
         windows.append(window)
     pixels = torch.from_numpy(np.stack(crops)).permute(0, 3, 1, 2).float()
-    return PreprocessedViews(pixels / 127.5 - 1.0, masks, methods, notes, windows)
+    return PreprocessedViews(pixels / 127.5 - 1.0, masks, [item.method for item in found],
+                             [item.note for item in found], windows, [item.confidence for item in found])

@@ -88,7 +88,7 @@ def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[Vi
             score=float(scores[k]), ambiguous=view_ambiguous(view, bool(ambiguous[k])),
             runner_up=matrix_to_pose(runner) if np.isfinite(runner).all() else no_pose(),
             roll_deg=_nan_if_none(view.roll_deg), polar_deg=_nan_if_none(view.polar_deg),
-            mask_method=view.mask_method, mask_note=view.mask_note,
+            mask_method=view.mask_method, mask_note=view.mask_note, mask_confidence=float(view.mask_confidence),
             polar_source="gravity" if view.polar_deg is not None else "",
             object_distance=_nan_if_none(view.distance), touches_border=bool(view.touches_border),
             reliable=bool(view.reliable),
@@ -140,7 +140,8 @@ def action_result_details(result: EstimatePoses.Result) -> dict[str, Any]:
     rounded to the message's float32)."""
     views = [ViewReport(view.mask_method, view.mask_note, _none_if_nan(view.roll_deg), _none_if_nan(view.polar_deg),
                         _none_if_nan(view.object_distance), touches_border=view.touches_border,
-                        reliable=view.reliable, refinement=refinement_of(view)) for view in result.views]
+                        reliable=view.reliable, refinement=refinement_of(view),
+                        mask_confidence=float(view.mask_confidence)) for view in result.views]
     return estimate_details(views, result.anchor_polar_deg, result.anchor_polar_source, result.object_distance,
                             result.distance_source, result.forward_samples, result.backward_samples,
                             {stage.name: (stage.forward_samples, stage.backward_samples) for stage in result.stages},

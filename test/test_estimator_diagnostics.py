@@ -63,7 +63,8 @@ def three_view_result(touching: tuple[bool, bool, bool], ambiguous: tuple[bool, 
     solved = SolverResult(np.zeros((2, 3)), np.zeros(2), np.full((2, 3), np.nan), np.full(2, np.nan),
                           np.array(ambiguous), np.ones(2), 0, 0)
     return PipelineResult(np.tile(np.eye(4), (3, 1, 1)), np.full((3, 4, 4), np.nan), solved,
-                          PreprocessedViews(torch.zeros(3, 3, 4, 4), masks, ["depth"] * 3, [""] * 3, [(0, 0, 8)] * 3),
+                          PreprocessedViews(torch.zeros(3, 3, 4, 4), masks, ["depth"] * 3, [""] * 3, [(0, 0, 8)] * 3,
+                                            [1.0] * 3),
                           masks, reports, 90.0, "parameter", 0.5, "depth",
                           NextView(np.array([1.0, 3.0, 0.5]), np.eye(4), 0.5, "coverage", None))
 

@@ -214,3 +214,16 @@ def test_an_anchor_without_depth_leaves_the_poses_to_the_diffusion_estimate(scen
     views, masks, _, _, _ = scene
     assert verify_with_depth([dataclasses.replace(views[0], depth=None), views[1]], masks[:2],
                              *no_diffusion(2), 0.005) is None
+
+
+@pytest.mark.slow
+def test_a_view_whose_mask_is_unsure_stays_out_of_the_fused_cloud_but_keeps_its_pose(scene):
+    views, masks, _, _, _ = scene
+    settings = VerificationSettings(sources=frozenset({Source.REGISTRATION, Source.GRAVITY}))
+    both = verify_with_depth(views[:2], masks[:2], *no_diffusion(2), 0.005, settings)
+    alone = verify_with_depth(views[:2], masks[:2], *no_diffusion(2), 0.005, settings, fuse=[True, False])
+    assert both.views[1].refined and not both.views[1].ambiguous, "the view is placed: it would be fused"
+    np.testing.assert_array_equal(alone.poses, both.poses)
+    anchor_only = verify_with_depth(views[:1] * 2, masks[:1] * 2, *no_diffusion(2), 0.005, settings,
+                                    fuse=[True, False]).cloud
+    assert len(alone.cloud.points) == len(anchor_only.points) < len(both.cloud.points)

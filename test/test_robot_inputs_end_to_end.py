@@ -127,7 +127,7 @@ def assert_same_details(offline, replay) -> None:
         for a, b in zip(offline, replay):
             assert_same_details(a, b)
     elif isinstance(offline, float):
-        assert replay == pytest.approx(offline, rel=1e-6, abs=1e-5)
+        assert replay == pytest.approx(offline, rel=1e-6, abs=1e-5, nan_ok=True)
     else:
         assert offline == replay
 

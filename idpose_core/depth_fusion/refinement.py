@@ -126,11 +126,11 @@ def gate(registration: Registration, seed: np.ndarray, voxel_size: float, distan
 
 def refine_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray,
                       cloud_voxel_size: float, settings: RefinementSettings = RefinementSettings(),
-                      ) -> DepthRefinement | None:
+                      fuse: Sequence[bool] | None = None) -> DepthRefinement | None:
     """Refine the diffusion ``poses`` (N, 4, 4, in the anchor's optical frame) of the ``views`` with their depth
-    inside ``masks`` (each (H_k, W_k) bool in its view's image); the fused cloud is thinned to ``cloud_voxel_size``
-    (m). None when the anchor has no usable depth: nothing to register onto. Views without depth keep their
-    diffusion pose."""
+    inside ``masks`` (each (H_k, W_k) bool in its view's image); the fused cloud holds the anchor and the refined
+    views that ``fuse`` (N,) allows (all when None), thinned to ``cloud_voxel_size`` (m). None when the anchor has
+    no usable depth: nothing to register onto. Views without depth keep their diffusion pose."""
     poses = np.asarray(poses, dtype=np.float64)
     clouds = [view_cloud(view, mask) for view, mask in zip(views, masks)]
     if clouds[0] is None:
@@ -168,6 +168,6 @@ def refine_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
             rotation, translation = pose_change(current[k], poses[k]) if not note else (0.0, 0.0)
             reports[k] = ViewRefinement(not note, note, registration.fitness, registration.inlier_rmse,
                                         rotation, translation)
-    kept = [k for k in range(len(views)) if k == 0 or reports[k].refined]
+    kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and (fuse is None or fuse[k]))]
     cloud = fused_cloud([clouds[k] for k in kept], [current[k] for k in kept], cloud_voxel_size)
     return DepthRefinement(poses=current, views=reports, cloud=cloud, voxel_size=voxel)

@@ -144,11 +144,14 @@ def object_moved(ranking: PairRanking, extent: float, settings: VerificationSett
 def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], poses: np.ndarray,
                       runner_up_poses: np.ndarray, cloud_voxel_size: float,
                       settings: VerificationSettings = VerificationSettings(),
-                      confidence: np.ndarray | None = None) -> DepthRefinement | None:
+                      confidence: np.ndarray | None = None,
+                      fuse: Sequence[bool] | None = None) -> DepthRefinement | None:
     """Choose the poses (N, 4, 4, anchor's optical frame) of views with depth among every source's hypotheses, and
     their runner-ups; ``poses`` and ``runner_up_poses`` are the diffusion's answers and runner-ups (NaN where none),
     which views without depth keep, and ``confidence`` (N,) the solver's in each answer (the anchor's 1; None: no
-    confidence, the diffusion answer gets no prior). None when the anchor shows no object depth."""
+    confidence, the diffusion answer gets no prior). The fused cloud holds the anchor and the views placed
+    unambiguously that ``fuse`` (N,) allows (all when None: a view whose mask is unsure stays out). None when the
+    anchor shows no object depth."""
     poses = np.asarray(poses, dtype=np.float64)
     anchor = view_data(views[0], masks[0], None)
     if anchor.evidence is None:
@@ -196,6 +199,7 @@ def verify_with_depth(views: Sequence[ViewInput], masks: Sequence[np.ndarray], p
             note = f"the views disagree by {loop:.0f} deg"
         reports.append(ViewRefinement(True, note, fitness, rmse, rotation, translation, pick.source.value,
                                       pick.margin, ambiguous, object_moved(rankings[(0, k)], extent, settings), loop))
-    kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and not reports[k].ambiguous)]
+    kept = [k for k in range(len(views)) if k == 0 or (reports[k].refined and not reports[k].ambiguous
+                                                       and (fuse is None or fuse[k]))]
     cloud = fused_cloud([data[k].cloud for k in kept], [current[k] for k in kept], cloud_voxel_size)
     return DepthRefinement(poses=current, views=reports, cloud=cloud, voxel_size=voxel, runner_up_poses=runners)

@@ -10,7 +10,8 @@ it stands out in front of and touches (a duck's head in front of its body: a par
 out what runs out of the image upwards (a wall whose top the camera does not see; an object of any size
 shows its top), take the target's piece (the one in the region of interest, else the one nearest the image
 centre), give it back its base (the bottom centimetre, under the height test's threshold: over its
-footprint, not facing up) and let GrabCut, seeded from it, settle the boundary the depth leaves ragged.
+footprint, not facing up), close its holes but those the camera sees the table or the room through (a mug's
+handle) and let GrabCut, seeded from it, settle the boundary the depth leaves ragged.
 Tolerances grow with each reading's depth, not the image's: a far wall does not loosen them. Depth is in metres
 in the camera's optical frame; 0 or NaN means no reading.
 """
@@ -18,12 +19,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
+from idpose_core.segmentation.confidence import mask_confidence
 from idpose_core.segmentation.errors import DepthSegmentationError
 from idpose_core.segmentation.footprint import recover_base
 from idpose_core.segmentation.grabcut import grabcut_refine
+from idpose_core.segmentation.holes import close_holes
 from idpose_core.segmentation.merge import merge_carried_pieces
 from idpose_core.segmentation.pieces import connected_pieces, nearest_index
 from idpose_core.segmentation.plane import PLANE_TOLERANCE, Plane, backproject, depth_tolerance, support_plane
@@ -34,6 +36,7 @@ from idpose_core.view_input import ViewInput
 MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
 SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough points this close to the plane
 # (``stands``) stands on it (a curved bottom starts a few cm up); one without is carried by another piece
+TOUCHING_NOTE_SHARE = 0.1  # of the readings along the mask's outline: attached to it but left out, the note says so
 FOOT_BAND = 0.01  # m above the height test's threshold: each of two parts kept apart at a crease reaches this low
 # (a box's foot, a table's leg; not a marker low on a brick's side, which SUPPORT_HEIGHT would count as standing)
 
@@ -41,20 +44,14 @@ FOOT_BAND = 0.01  # m above the height test's threshold: each of two parts kept 
 @dataclass(frozen=True)
 class DepthCut:
     """``mask`` (H, W) bool of the target; ``depth_mask`` before GrabCut; the support ``plane``; ``note``: what the
-    mask is unsure of (the central piece left out as the room), else empty."""
+    mask is unsure of (the central piece left out as the room, a piece touching the object left out), else empty;
+    ``confidence`` in [0, 1]: how separable the object is from what was left out (``mask_confidence``)."""
 
     mask: np.ndarray
     depth_mask: np.ndarray
     plane: Plane
     note: str = ""
-
-
-def _fill_holes(mask: np.ndarray) -> np.ndarray:
-    """The mask with every hole closed (what the outer contours enclose)."""
-    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    filled = np.zeros(mask.shape, np.uint8)
-    cv2.drawContours(filled, contours, -1, 1, thickness=cv2.FILLED)
-    return filled.astype(bool)
+    confidence: float = 1.0
 
 
 def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
@@ -74,14 +71,19 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     known_height = height.ravel()[nearest]  # a hole has its nearest reading's height
     count, labels, apart = split_touching(labels, count, points, known_height, threshold + FOOT_BAND, view.rgb)
     labels = merge_carried_pieces(labels, count, known_height, points, valid,
-                                  depth_tolerance(depth, SUPPORT_HEIGHT, 0.05), plane, apart)
+                                  depth_tolerance(depth, SUPPORT_HEIGHT, 0.05), plane, view.rgb, apart)
     on_plane = valid & (np.abs(height) < depth_tolerance(depth, PLANE_TOLERANCE, 0.01))
     kept = drop_scenery(labels, count, known_height, plane)
     piece = target_piece(kept, count, view.roi)
-    note = ""
+    notes = []
     if view.roi is None and nearer_the_centre(labels & (kept == 0), piece):
-        note = ("the piece nearest the image centre runs out of the image upwards and was left out as the room (an "
-                "object cut off at the image's top?)")
-    piece = _fill_holes(recover_base(piece, points, valid, height, plane, threshold))
+        notes.append("the piece nearest the image centre runs out of the image upwards and was left out as the room "
+                     "(an object cut off at the image's top?)")
+    piece = close_holes(recover_base(piece, points, valid, height, plane, threshold), points, valid, height, plane,
+                        threshold)
     mask = grabcut_refine(view.rgb, piece, on_plane, ~valid) if refine else piece
-    return DepthCut(mask=mask, depth_mask=piece, plane=plane, note=note)
+    confidence = mask_confidence(piece, points, valid, valid & (height > threshold))
+    if confidence < 1.0 - TOUCHING_NOTE_SHARE:
+        notes.append(f"something touching the object was left out ({100 * (1 - confidence):.0f} % of the readings "
+                     "along its outline are attached to it)")
+    return DepthCut(mask=mask, depth_mask=piece, plane=plane, note="; ".join(notes), confidence=confidence)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from idpose_core.segmentation.colour import chromaticity, same_colour
 from idpose_core.segmentation.footprint import over_footprint
 from idpose_core.segmentation.pieces import stands
 from idpose_core.segmentation.plane import Plane, depth_tolerance
@@ -17,6 +18,7 @@ CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most o
 # edge lie this far inside the piece's footprint (a table's legs under its top; a box behind the top lies outside)
 MIN_SHARED_EDGE = 0.05  # of a carried piece's outline: it touches what carries it along more than this (a table
 # top that touches a crate behind it at one corner is not carried by the crate)
+REST_MARGIN = 0.01  # m: a part resting on a piece lies over its footprint grown by this (a head overhangs a little)
 GAP_POINTS = 400  # of each side, for the gap between two sets of points
 
 
@@ -32,6 +34,15 @@ def _attach_gap(edge: np.ndarray) -> float:
     """The most a piece's ``edge`` points (N, 3) may lie from a piece they are attached to (m): ``ATTACH_GAP``, or
     its share of their median depth when larger."""
     return float(depth_tolerance(np.median(edge[:, 2]), ATTACH_GAP, ATTACH_GAP_SHARE))
+
+
+def _rests_on(piece_points: np.ndarray, other_points: np.ndarray, plane: Plane) -> bool:
+    """Whether most of ``piece_points`` (N, 3) lie over the footprint of ``other_points`` (M, 3) on the plane, grown
+    by ``REST_MARGIN``: a part on top of the other piece (a brick's studs, a duck's head seen from low, behind the
+    front it rises over), not an object behind it (which stands beyond its footprint)."""
+    if len(piece_points) < 3 or len(other_points) < 3:
+        return False
+    return bool(over_footprint(other_points, piece_points, plane, REST_MARGIN).mean() > 0.5)
 
 
 def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: np.ndarray, height: np.ndarray,
@@ -57,21 +68,48 @@ def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: 
     return carriers
 
 
+def _whole_of(piece: int, inside: np.ndarray, labels: np.ndarray, areas: np.ndarray, standing: np.ndarray,
+              points: np.ndarray, valid: np.ndarray, plane: Plane, chroma: np.ndarray, may_join) -> int:
+    """The neighbour that a piece which does not stand (its pixels ``inside``) is a part of, or 0: one larger than
+    it, or standing, that it shares more than ``MIN_SHARED_EDGE`` of its outline with and is attached to (its edge
+    points within ``ATTACH_GAP`` of the neighbour's), where they meet standing out in front of it, or behind it
+    and either resting on it (``_rests_on``) or of its colour along the edge (``same_colour`` of ``chroma``: one
+    object continued across a depth step); of several, the one with the longest shared edge."""
+    kernel = np.ones((3, 3), np.uint8)
+    depth = np.where(valid, points[..., 2], 0.0)
+    ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
+    neighbours, shared = np.unique(labels[ring], return_counts=True)
+    best, best_shared = 0, 0
+    for other, length in zip(neighbours, shared):
+        if other == 0 or other == piece or not may_join(piece, other) or not (
+                areas[other] > areas[piece] or standing[other]):
+            continue
+        edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside & valid
+        behind = ring & (labels == other) & valid
+        if length <= max(best_shared, MIN_SHARED_EDGE * ring.sum()) or not edge.any() or not behind.any():
+            continue
+        in_front = np.median(depth[edge]) < np.median(depth[behind])
+        if ((in_front or _rests_on(points[inside & valid], points[(labels == other) & valid], plane)
+             or same_colour(chroma, edge, behind)) and _gap(points[edge], points[behind]) < _attach_gap(points[edge])):
+            best, best_shared = int(other), length
+    return best
+
+
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
-                         valid: np.ndarray, support: np.ndarray, plane: Plane,
+                         valid: np.ndarray, support: np.ndarray, plane: Plane, rgb: np.ndarray,
                          apart: frozenset[tuple[int, int]] = frozenset()) -> np.ndarray:
     """The labels with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
     table top and its legs), then every piece that still does not reach the plane (``stands``: too few of its
-    points within ``support`` (H, W), m) joined to a neighbouring piece, larger or (standing on the plane) at
-    least half as large, that it stands out in front of and is attached to (where they meet it is nearer the
-    camera, its edge points lie within ``ATTACH_GAP`` of the neighbour's, and they share more than
-    ``MIN_SHARED_EDGE`` of its outline; of several, the one with the longest shared edge): a part of an
-    object that a depth jump cut off (a duck's head and back, larger than the breast below them). A piece behind
-    its neighbour stays apart (an object partly hidden by the target), and so does one that is well in front of
-    it (a ball whose lowest visible points are high on its curve, before a box behind it). Pieces that ``apart``
-    pairs (``split_touching``: two objects) never join, nor do the pieces they have joined."""
-    depth = np.where(valid, points[..., 2], 0.0)
+    points within ``support`` (H, W), m) joined to the neighbouring piece it is a part of (``_whole_of``: it stands
+    out in front of it, or rests on it or continues its colour behind it, attached; ``rgb`` (H, W, 3)), until none
+    joins: a part of an object that a depth jump cut off
+    (a duck's head and back, larger than the breast below them; a brick's studs seen from level, behind its front
+    face, and the marker on them). A piece behind its neighbour and beyond its footprint stays apart (an object
+    partly hidden by the target), and so does one that is well in front of it (a ball whose lowest visible points
+    are high on its curve, before a box behind it). Pieces that ``apart`` pairs (``split_touching``: two objects)
+    never join, nor do the pieces they have joined."""
     labels = labels.copy()
+    chroma = chromaticity(rgb)
     owner = np.arange(count)  # the piece each original piece has joined
 
     def may_join(piece: int, other: int) -> bool:
@@ -95,27 +133,18 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
                 areas[piece] += areas[other]
                 areas[other] = 0
                 standing[piece] |= standing[other]
-    for piece in np.argsort(areas):  # smallest first: a head joins its body before the body is judged
-        if piece == 0 or areas[piece] == 0 or standing[piece]:
-            continue
-        inside = labels == piece
-        ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
-        neighbours, shared = np.unique(labels[ring], return_counts=True)
-        best, best_shared = 0, 0
-        for other, length in zip(neighbours, shared):
-            if other == 0 or other == piece or not may_join(piece, other) or not (
-                    areas[other] > areas[piece] or (standing[other] and 2 * areas[other] >= areas[piece])):
+    joined = True
+    while joined:  # again after a join: a part on a part (a marker on a brick's studs) joins once they have
+        joined = False
+        for piece in np.argsort(areas):  # smallest first: a head joins its body before the body is judged
+            if piece == 0 or areas[piece] == 0 or standing[piece]:
                 continue
-            edge = cv2.dilate((labels == other).astype(np.uint8), kernel, iterations=2).astype(bool) & inside & valid
-            behind = ring & (labels == other) & valid
-            if length <= max(best_shared, MIN_SHARED_EDGE * ring.sum()) or not edge.any() or not behind.any():
-                continue
-            if (np.median(depth[edge]) < np.median(depth[behind])
-                    and _gap(points[edge], points[behind]) < _attach_gap(points[edge])):
-                best, best_shared = other, length
-        if best:
-            labels[inside] = best
-            owner[owner == piece] = best
-            areas[best] += areas[piece]
-            areas[piece] = 0
+            inside = labels == piece
+            best = _whole_of(piece, inside, labels, areas, standing, points, valid, plane, chroma, may_join)
+            if best:
+                labels[inside] = best
+                owner[owner == piece] = best
+                areas[best] += areas[piece]
+                areas[piece] = 0
+                joined = True
     return labels

@@ -7,6 +7,7 @@ import math
 import cv2
 import numpy as np
 
+from idpose_core.segmentation.colour import chromaticity, same_colour
 from idpose_core.segmentation.normals import surface_normals
 from idpose_core.segmentation.pieces import MIN_PIECE_SHARE, border_labels, nearest_index, stands
 
@@ -16,8 +17,6 @@ CREASE_SMOOTHING = 0.01  # m: the points are smoothed over neighbours this close
 CREASE_ANGLE_DEG = 35.0  # the two normals differ by more than this at a crease
 NECK_RADIUS = 3  # px: a piece narrower than a disc this wide is cut there too (then joined again unless the
 # two sides are two objects, as at a concave fold)
-OBJECT_CHROMA_DELTA = 0.04  # between the median chromaticities (r, g, b) / (r + g + b) of two parts that stay apart
-# at a cut: two objects differ in colour, two faces of one object under a lamp only in brightness
 
 
 def concave_creases(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -94,8 +93,7 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
     cut_pairs: set[tuple[int, int]] = set()
     if not crease.any():
         return count, labels, frozenset(cut_pairs)
-    chroma = rgb.astype(np.float64) + 1.0
-    chroma /= chroma.sum(axis=-1, keepdims=True)
+    chroma = chromaticity(rgb)
     labels = labels.copy()
     reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (4 * CREASE_STEP + 1,) * 2)
     for piece in np.setdiff1d(np.unique(labels[crease & (labels > 0)]), border_labels(labels)):
@@ -107,13 +105,12 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
             continue
         parts = _nearest_fill(_grown(np.where(np.isin(parts, large), parts, 0), inside), inside)
         alone = {part: stands(height[parts == part], footing[parts == part]) for part in large}
-        colour = {part: np.median(chroma[parts == part], axis=0) for part in large}
         group = {part: part for part in large}
         for part in large:
             near = cv2.dilate((parts == part).astype(np.uint8), reach).astype(bool) & inside
             for other in np.unique(parts[near]):
                 apart = (alone[part] and alone[other]
-                         and np.linalg.norm(colour[part] - colour[other]) > OBJECT_CHROMA_DELTA)
+                         and not same_colour(chroma, parts == part, parts == other))
                 if other > part and not apart:
                     _union(group, part, int(other))
         roots = sorted({_root(group, part) for part in large}, key=lambda root: -areas[root])

@@ -40,8 +40,9 @@ WALL_HEIGHT = 2.5  # m
 TABLE_TEXTURES = ("table/table.png", "checker_grid.jpg", "tray/tray.jpg", "domino/domino.jpg")
 WALL_TEXTURES = ("tex256.png", "uvmap.png", "checker_blue.png", "jenga/jenga.png", "cube.png")
 DISTRACTOR_TEXTURES = ("jenga/jenga.png", "domino/domino.jpg", "checker_blue.png", "uvmap.png")
-CHALLENGES = ("clutter", "parts", "touching", "backdrop", "off_centre")
+CHALLENGES = ("clutter", "parts", "touching", "backdrop", "off_centre", "near_backdrop")
 BACKDROP_GAP = (0.10, 0.30)  # m from the target's bounding ball to the backdrop panel
+NEAR_BACKDROP_GAP = (0.0, 0.04)  # m, for "near_backdrop": a target a few centimetres in front of a wall
 OFF_CENTRE = (0.3, 0.65)  # of the way from the image centre to its edge: where an off-centre target's centre sits
 FAIR_MARGIN = 0.15  # of that way: how much farther out than the target every distractor's centre is
 AIM_TRIES = 100
@@ -112,14 +113,15 @@ def parts_target(rng: np.random.Generator) -> ObjectSpec:
              position=(body[0] / 2 + reach - head / 2, 0.0, body[2] / 2 + head / 2 - 0.05))))
 
 
-def _backdrop(rng: np.random.Generator, table_top: float, camera_azimuth: float, target_radius: float) -> Placement:
-    """A textured panel standing on the table 10-30 cm behind the target as seen from ``camera_azimuth``,
-    facing the camera (its broad side across the view)."""
+def _backdrop(rng: np.random.Generator, table_top: float, camera_azimuth: float, target_radius: float,
+              gap: tuple[float, float] = BACKDROP_GAP) -> Placement:
+    """A textured panel standing on the table ``gap`` (m, drawn in that range) behind the target's bounding ball as
+    seen from ``camera_azimuth``, facing the camera (its broad side across the view)."""
     sides = (0.04, 1.0, float(rng.uniform(0.5, 0.8)))
     texture = WALL_TEXTURES[int(rng.integers(len(WALL_TEXTURES)))]
     spec = ObjectSpec("backdrop", (Part("cube.obj", scale=sides, texture=texture),))
     radius = float(rng.uniform(0.25, 0.35))
-    distance = target_radius + float(rng.uniform(*BACKDROP_GAP)) + sides[0] / 2
+    distance = target_radius + float(rng.uniform(*gap)) + sides[0] / 2
     azimuth = camera_azimuth + math.pi + float(rng.uniform(-0.2, 0.2))
     return Placement(spec, (distance * math.cos(azimuth), distance * math.sin(azimuth),
                             table_top + half_height(spec, radius)), radius, math.degrees(azimuth))
@@ -133,7 +135,8 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
 
     ``challenge`` (``CHALLENGES``): "parts" turns the target's front (+x) towards ``behind_azimuth``;
     "touching" puts the first distractor, a box, against the target's side as seen from there; "backdrop"
-    adds a panel 10-30 cm behind the target; "clutter" and "off_centre" (a matter of the camera) add nothing.
+    adds a panel 10-30 cm behind the target, "near_backdrop" 0-4 cm behind its bounding ball (a wall it almost
+    touches); "clutter" and "off_centre" (a matter of the camera) add nothing.
     ``random_lighting`` False lights the scene with ``TRAINING_LIGHT`` (the light is drawn either way, so the
     rest of the layout is the same). ``target_radius`` (m): the ball the target fits (distractors keep their sizes
     and stand around it); ``table`` False stands everything on the floor (a chair before a mobile robot).
@@ -167,6 +170,8 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
         placed.append(Placement(spec, (x, y, z), radius, float(rng.uniform(0.0, 360.0))))
     if challenge == "backdrop":
         placed.append(_backdrop(rng, table_top, behind_azimuth, target_radius))
+    if challenge == "near_backdrop":
+        placed.append(_backdrop(rng, table_top, behind_azimuth, target_radius, NEAR_BACKDROP_GAP))
     light = random_light(rng)
     if not random_lighting:
         light = TRAINING_LIGHT

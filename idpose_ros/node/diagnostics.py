@@ -1,6 +1,7 @@
 """The estimator's health as a `diagnostic_msgs/DiagnosticArray` for `/diagnostics`."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from builtin_interfaces.msg import Time
@@ -84,13 +85,16 @@ def diagnostic_array(status: EstimatorStatus, hardware_id: str, stamp: Time) -> 
 
 def result_inputs(result: PipelineResult) -> dict[str, str]:
     """Diagnostic values of what an estimate read off its views: where the anchor's polar angle and distance
-    came from, and per view k (0 = the anchor) the mask method (and why a more trusted one was not used),
+    came from, and per view k (0 = the anchor) the mask method (and why a more trusted one was not used), a depth
+    cut's confidence,
     whether the mask touches the image border and whether the pose is reliable, the roll and polar angle from
     gravity."""
     values = {"anchor_polar_deg": f"{result.anchor_polar_deg:.2f}", "anchor_polar_source": result.polar_source,
               "object_distance": f"{result.object_distance:.4f}", "object_distance_source": result.distance_source}
     for k, view in enumerate(result.views):
         values[f"view_{k}_mask"] = view.mask_method + (f" ({view.mask_note})" if view.mask_note else "")
+        if math.isfinite(view.mask_confidence):
+            values[f"view_{k}_mask_confidence"] = f"{view.mask_confidence:.2f}"
         values[f"view_{k}_touches_border"] = str(view.touches_border).lower()
         values[f"view_{k}_reliable"] = str(view.reliable).lower()
         if view.roll_deg is not None:
