@@ -17,7 +17,14 @@ import numpy as np
 import torch
 
 from idpose_core.cameras import anchor_frame_poses
-from idpose_core.depth_fusion import DepthRefinement, ObjectFrame, ViewRefinement, object_frame, refine_with_depth
+from idpose_core.depth_fusion import (
+    DepthRefinement,
+    ObjectFrame,
+    ViewRefinement,
+    cross_view_masks,
+    object_frame,
+    refine_with_depth,
+)
 from idpose_core.deroll import original_frame_mask, upright_view
 from idpose_core.gravity import polar_angle, with_roll
 from idpose_core.next_view import NextView, ReachableSet, pose_spheres, suggest_next_view, view_spheres
@@ -55,7 +62,8 @@ class PipelineSettings:
     (``idpose_core.pose_hypotheses``, with ``verification``), "refine" refines the diffusion estimate by registration
     (``idpose_core.depth_fusion``); ``reachable`` and ``next_view_criterion``: where the next camera may stand and
     how it is chosen (``idpose_core.next_view``); ``min_mask_confidence``: a view cut by depth less confident than
-    this that its object is apart from what was left out is never reliable and stays out of the fused cloud."""
+    this that its object is apart from what was left out is never reliable and stays out of the fused cloud;
+    ``cross_view_masks``: once posed, the masks get a second pass from the fused cloud (``second_mask_pass``)."""
 
     solver: SolverConfig
     object_distance: float = 1.0
@@ -67,6 +75,7 @@ class PipelineSettings:
     depth_poses: str = "verify"
     verification: VerificationSettings = VerificationSettings()
     min_mask_confidence: float = MIN_MASK_CONFIDENCE
+    cross_view_masks: bool = True
 
     def __post_init__(self) -> None:
         if self.depth_poses not in DEPTH_POSES:
@@ -82,7 +91,8 @@ class ViewReport:
     ``reliable`` = neither touching the border, nor cut by depth with a ``mask_confidence`` (how separable the
     object is from what the cut left out; NaN for other mask methods) under the settings' minimum, nor, for a view
     other than the anchor, ambiguous; ``refinement``: what depth did to its pose (None when no depth refinement
-    ran)."""
+    ran); ``mask_pass_change``: the pixels the cross-view pass added to or removed from the mask, as a share of it
+    (``second_mask_pass``)."""
 
     mask_method: str
     mask_note: str
@@ -93,6 +103,7 @@ class ViewReport:
     reliable: bool
     refinement: ViewRefinement | None = None
     mask_confidence: float = math.nan
+    mask_pass_change: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -243,6 +254,26 @@ def with_refinement(report: ViewReport, refinement: ViewRefinement, min_mask_con
     return replace(report, refinement=refinement, reliable=trusted)
 
 
+def second_mask_pass(views: Sequence[ViewInput], masks: Sequence[np.ndarray], reports: Sequence[ViewReport],
+                     depth: DepthRefinement, settings: PipelineSettings) -> tuple[list[np.ndarray], list[ViewReport]]:
+    """The masks and reports after the cross-view pass (``cross_view_masks``, with ``settings.cross_view_masks``):
+    the anchor and the views depth placed unambiguously on a still object take in what the fused cloud supports,
+    those also left out of the cloud lose what lies beyond it; the report's ``mask_note`` says what changed and
+    ``mask_pass_change`` by how much."""
+    if not settings.cross_view_masks or len(depth.cloud.points) == 0:
+        return list(masks), list(reports)
+    posed = [k == 0 or (r.refinement is not None and r.refinement.refined and not r.refinement.ambiguous
+                        and not r.refinement.object_moved) for k, r in enumerate(reports)]
+    fused = [mask_trusted(report.mask_confidence, settings.min_mask_confidence) for report in reports]
+    passes = cross_view_masks(views, masks, depth.poses, depth.cloud.points, settings.cloud_voxel_size, posed, fused)
+    updated = []
+    for report, mask, done in zip(reports, masks, passes):
+        area = max(int(np.count_nonzero(mask)), 1)
+        updated.append(replace(report, mask_note="; ".join(filter(None, [report.mask_note, done.note(area)])),
+                               mask_pass_change=(done.added + done.removed) / area))
+    return [done.mask for done in passes], updated
+
+
 def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], settings: PipelineSettings,
                         progress: Progress | None = None, cancel: threading.Event | None = None,
                         samples: SampleCount | None = None) -> PipelineResult:
@@ -286,6 +317,7 @@ def estimate_view_poses(predictor: NoisePredictor, views: Sequence[ViewInput], s
                    for report, refinement in zip(reports, depth.views)]
         if depth.runner_up_poses is not None:  # the verifier's runner-up where it chose the pose
             runners = depth.runner_up_poses
+        masks, reports = second_mask_pass(views, masks, reports, depth, settings)
     return PipelineResult(poses=poses, runner_up_poses=runners,
                           solver_result=solved, preprocessed=preprocessed, masks=masks, views=reports,
                           anchor_polar_deg=polar_deg,

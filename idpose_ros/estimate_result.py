@@ -89,6 +89,7 @@ def view_estimates(result: PipelineResult, headers: Sequence[Header]) -> list[Vi
             runner_up=matrix_to_pose(runner) if np.isfinite(runner).all() else no_pose(),
             roll_deg=_nan_if_none(view.roll_deg), polar_deg=_nan_if_none(view.polar_deg),
             mask_method=view.mask_method, mask_note=view.mask_note, mask_confidence=float(view.mask_confidence),
+            mask_pass_change=float(view.mask_pass_change),
             polar_source="gravity" if view.polar_deg is not None else "",
             object_distance=_nan_if_none(view.distance), touches_border=bool(view.touches_border),
             reliable=bool(view.reliable),
@@ -141,7 +142,8 @@ def action_result_details(result: EstimatePoses.Result) -> dict[str, Any]:
     views = [ViewReport(view.mask_method, view.mask_note, _none_if_nan(view.roll_deg), _none_if_nan(view.polar_deg),
                         _none_if_nan(view.object_distance), touches_border=view.touches_border,
                         reliable=view.reliable, refinement=refinement_of(view),
-                        mask_confidence=float(view.mask_confidence)) for view in result.views]
+                        mask_confidence=float(view.mask_confidence),
+                        mask_pass_change=float(view.mask_pass_change)) for view in result.views]
     return estimate_details(views, result.anchor_polar_deg, result.anchor_polar_source, result.object_distance,
                             result.distance_source, result.forward_samples, result.backward_samples,
                             {stage.name: (stage.forward_samples, stage.backward_samples) for stage in result.stages},

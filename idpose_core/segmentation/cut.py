@@ -33,7 +33,8 @@ from idpose_core.segmentation.target import drop_scenery, nearer_the_centre, tar
 from idpose_core.segmentation.touching import split_touching
 from idpose_core.view_input import ViewInput
 
-MIN_HEIGHT = 0.008  # m, or 1.5 % of the depth when larger: standing on the plane
+MIN_HEIGHT = 0.008  # m, or MIN_HEIGHT_SHARE of the depth when larger: standing on the plane
+MIN_HEIGHT_SHARE = 0.015
 SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough points this close to the plane
 # (``stands``) stands on it (a curved bottom starts a few cm up); one without is carried by another piece
 TOUCHING_NOTE_SHARE = 0.1  # of the readings along the mask's outline: attached to it but left out, the note says so
@@ -65,7 +66,7 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     plane = support_plane(points[valid], view.gravity_up, np.random.default_rng(seed))
     height = plane.height(points)
     depth = np.where(valid, view.depth, 0.0)
-    threshold = depth_tolerance(depth, MIN_HEIGHT, 0.015)
+    threshold = depth_tolerance(depth, MIN_HEIGHT, MIN_HEIGHT_SHARE)
     nearest = nearest_index(valid)
     count, labels = connected_pieces(valid & (height > threshold), depth, valid, nearest)
     known_height = height.ravel()[nearest]  # a hole has its nearest reading's height
