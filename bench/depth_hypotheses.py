@@ -147,8 +147,9 @@ def measure(predictor, preset: str, spec, case: dict, rng: np.random.Generator) 
                                       VerificationSettings(sources=sources))
         seconds = time.perf_counter() - start
         poses = diffusion.poses if depth is None else depth.poses
-        reports = diffusion.views if depth is None else [with_refinement(report, refinement) for report, refinement
-                                                         in zip(diffusion.views, depth.views)]
+        reports = diffusion.views if depth is None else [
+            with_refinement(report, refinement, settings.min_mask_confidence)
+            for report, refinement in zip(diffusion.views, depth.views)]
         records.append({**base, "row": row, "errors": errors(poses, truth), "depth_seconds": seconds,
                         "reliable": [r.reliable for r in reports[1:]],
                         "sources": [r.refinement.source if r.refinement else "diffusion" for r in reports[1:]],
