@@ -36,7 +36,7 @@ CASES = (  # (title, challenge, scene index, targets, stereo)
     ("a held-out toy, parts behind a step (clutter 0)", "clutter", 0, "heldout", False),
     ("a held-out toy before a wall (near_backdrop 0)", "near_backdrop", 0, "heldout", False),
 )
-CROSS_VIEW_CASE = ("the second pass: a part one view lost (held-out, scene 1, view 0)", 5151, 1, "heldout", False, 0)
+CROSS_VIEW_CASE = ("second pass: a part one view lost", 5151, 1, "heldout", False, 0)  # held-out scene 1, view 0
 
 
 def case_views() -> list[tuple]:
