@@ -32,7 +32,10 @@ number of views, and adds the run (the commit measured, the seed, the depth, the
 bench/results/mask_quality/summary.json; ``--out FILE`` also writes every view's row there.
 
     python bench/mask_quality.py [--seed 1000] [--views 8] [--size 320] [--depth-noise 0.003 | --stereo]
-                                 [--targets demo|heldout]
+                                 [--targets demo|heldout] [--object-size 0.2]
+
+``--object-size`` (m) sets the ball the target fits (20 cm by default; the cameras' distances grow with its square
+root, and from 0.5 m the scene stands on the floor).
 """
 from __future__ import annotations
 
@@ -57,6 +60,8 @@ from idpose_core.synthetic.robot_views import pinhole_intrinsics  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
 from idpose_core.synthetic.tabletop import (  # noqa: E402
     CHALLENGES,
+    ROOM_HALF_SIDE,
+    TARGET_RADIUS,
     TabletopRenderer,
     challenge_camera,
     loose_box,
@@ -74,6 +79,7 @@ MIN_VISIBLE = 300  # px of the target that must be in sight
 MIN_VISIBLE_SHARE = 0.5  # of the target's silhouette: a target mostly hidden behind another object is not in view
 ROI_STREAM = 5  # the random stream of the regions of interest (and 6 of the crowded views'): as before the
 # sixth failure type, so that the boxes stay the same
+FLOOR_SIZE = 0.5  # m: an object this large stands on the floor, not on a table
 EXTRA_ROWS = ("off_centre_roi", "crowded", "crowded_roi")  # off-centre views beside the failure types
 SUMMARY_ABOUT = ("bench/mask_quality.py runs: per run the code measured (a commit; earlier code was run from its "
                  "checkout with this bench copied in), the seed, the depth noise and the mask IoU per failure type "
@@ -81,22 +87,25 @@ SUMMARY_ABOUT = ("bench/mask_quality.py runs: per run the code measured (a commi
 
 
 def challenge_view(challenge: str, index: int, seed: int, size: int, crowded: bool = False,
-                   depth_noise: float = 0.0, stereo: bool = False,
-                   targets: str = "demo") -> tuple[ViewInput, np.ndarray] | None:
+                   depth_noise: float = 0.0, stereo: bool = False, targets: str = "demo",
+                   object_size: float = 2 * TARGET_RADIUS) -> tuple[ViewInput, np.ndarray] | None:
     """(the view: colour, depth, intrinsics; the target's true mask) of scene ``index`` of a failure type, or
     None when too little of the target is in sight (under ``MIN_VISIBLE`` px, or under ``MIN_VISIBLE_SHARE`` of
     its silhouette: mostly hidden behind another object). ``crowded`` (off-centre only): another object nearer the
     image centre than the target. ``depth_noise``: the depth as a camera reads it (``sensor_depth``); ``stereo``:
     as an active stereo camera reads it (``stereo_depth``: noise growing with depth, no readings at edges).
-    ``targets``: the demo objects in turn, or (``heldout``) the catalogue's held-out objects."""
+    ``targets``: the demo objects in turn, or (``heldout``) the catalogue's held-out objects; ``object_size`` (m):
+    the ball the target fits, the cameras' distances scaled with it (``scaled_distance``), on the floor from
+    ``FLOOR_SIZE`` up."""
     rng = np.random.default_rng([seed, CHALLENGES.index(challenge), index] + [1] * crowded)
     pool = demo_objects() if targets == "demo" else heldout_objects(*BENCH_HELDOUT)
     target = parts_target(rng) if challenge == "parts" else pool[index % len(pool)]
     camera = None
     while camera is None:  # an off-centre view takes a new scene until a fair aim exists
         sphere = np.array([math.radians(rng.uniform(*POLAR_DEG)), rng.uniform(0.0, 2.0 * math.pi),
-                           rng.uniform(*DISTANCE)])
-        layout = random_layout(target, rng, behind_azimuth=float(sphere[1]), challenge=challenge)
+                           scaled_distance(rng.uniform(*DISTANCE), object_size)])
+        layout = random_layout(target, rng, behind_azimuth=float(sphere[1]), challenge=challenge,
+                               target_radius=object_size / 2, table=object_size < FLOOR_SIZE)
         camera = (off_centre_camera(sphere, layout, rng, FOV_DEG, crowded) if challenge == "off_centre"
                   else challenge_camera(sphere))
     with TabletopRenderer(layout, image_size=size, fov_deg=FOV_DEG) as renderer:
@@ -126,11 +135,11 @@ def score(view: ViewInput, truth: np.ndarray, name: str, index: int) -> dict:
 
 
 def measure(seed: int, views: int, size: int, depth_noise: float = 0.0, stereo: bool = False,
-            targets: str = "demo") -> dict:
+            targets: str = "demo", object_size: float = 2 * TARGET_RADIUS) -> dict:
     """Per failure type, and the off-centre rows with a region of interest or a crowded centre (``EXTRA_ROWS``):
-    every view's IoU and mask method (``challenge_view`` for the depth and the targets)."""
+    every view's IoU and mask method (``challenge_view`` for the depth, the targets and their size)."""
     results: dict[str, list[dict]] = {}
-    depth = {"depth_noise": depth_noise, "stereo": stereo, "targets": targets}
+    depth = {"depth_noise": depth_noise, "stereo": stereo, "targets": targets, "object_size": object_size}
     for challenge in CHALLENGES:
         results[challenge] = []
         for index in range(views):
@@ -150,6 +159,13 @@ def measure(seed: int, views: int, size: int, depth_noise: float = 0.0, stereo: 
                 results.setdefault("crowded_roi", []).append(
                     score(with_roi(view, truth, seed, index, True), truth, "crowded_roi", index))
     return results
+
+
+def scaled_distance(distance: float, object_size: float) -> float:
+    """A camera ``distance`` (m) drawn for a 20 cm object, for an object of ``object_size`` (m): times the square root
+    of their sizes' ratio (a small object fills less of the image, a large one more: 0.25-0.47 m for 8 cm, 0.9-1.6 m
+    for 1 m), inside the room's walls."""
+    return min(distance * math.sqrt(object_size / (2 * TARGET_RADIUS)), ROOM_HALF_SIDE - 0.2)
 
 
 LOW_IOU = 0.75  # a view under this IoU lost a large part of its object, or took in another
@@ -173,17 +189,19 @@ def main() -> None:
                         help="depth as an active stereo camera reads it (noise growing with depth, holes at edges)")
     parser.add_argument("--targets", choices=("demo", "heldout"), default="demo",
                         help="the six demo objects, or the catalogue's held-out objects (parts: generated either way)")
+    parser.add_argument("--object-size", type=float, default=2 * TARGET_RADIUS,
+                        help="the ball the target fits (m; cameras farther in proportion; on the floor from 0.5 m)")
     parser.add_argument("--out", type=Path, default=None, help="JSON file for every view's row (default: none)")
     args = parser.parse_args()
     started = time.monotonic()
-    results = measure(args.seed, args.views, args.size, args.depth_noise, args.stereo, args.targets)
+    results = measure(args.seed, args.views, args.size, args.depth_noise, args.stereo, args.targets, args.object_size)
     table = {challenge: summary(rows) for challenge, rows in results.items() if rows}
     table["all"] = summary([row for name, rows in results.items() if name not in EXTRA_ROWS for row in rows])
     print(f"| type (seed {args.seed}) | views | mean IoU | worst IoU | under {LOW_IOU} |\n|---|---|---|---|---|")
     for name, row in table.items():
         print(f"| {name} | {row['views']} | {row['mean']:.3f} | {row['worst']:.3f} | {100 * row['under_0.75']:.0f} % |")
     run = {"code": measured_code(), "seed": args.seed, "depth_noise": args.depth_noise, "stereo": args.stereo,
-           "targets": args.targets, "size": args.size,
+           "targets": args.targets, "object_size": args.object_size, "size": args.size,
            "summary": table, "seconds": round(time.monotonic() - started, 1)}
     summary_file = result_path("mask_quality", "summary.json")
     runs = json.loads(summary_file.read_text())["runs"] if summary_file.is_file() else []
