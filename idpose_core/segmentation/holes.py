@@ -31,8 +31,9 @@ def seen_through(readings: np.ndarray, reading_height: np.ndarray, piece_points:
 def close_holes(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, height: np.ndarray, plane: Plane,
                 band: np.ndarray) -> np.ndarray:
     """``piece`` (H, W) bool with every hole closed (what its outer contours enclose) but those whose readings
-    mostly lie beyond the object (``seen_through``; ``points`` (H, W, 3), ``height`` and ``band`` (H, W) m): a
-    hole without readings, or showing the object's own inside, is closed."""
+    mostly lie behind the piece around them and beyond the object (``seen_through``; ``points`` (H, W, 3),
+    ``height`` and ``band`` (H, W) m): a hole without readings, showing the object's own inside, or filled by a part
+    standing out in front of it (a head before a small body), is closed."""
     contours, _ = cv2.findContours(piece.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     filled = np.zeros(piece.shape, np.uint8)
     cv2.drawContours(filled, contours, -1, 1, thickness=cv2.FILLED)
@@ -42,10 +43,15 @@ def close_holes(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, height
     own = piece & valid
     count, labels = cv2.connectedComponents(holes.astype(np.uint8), connectivity=4)
     closed = piece | holes
+    kernel = np.ones((3, 3), np.uint8)
     for hole in range(1, count):
         inside = labels == hole
         read = inside & valid
+        rim = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & own
+        if not read.any() or not rim.any():
+            continue
+        behind = points[read][:, 2] > np.median(points[rim][:, 2])  # not a part standing out in front of the piece
         beyond = seen_through(points[read], height[read], points[own], height[own], plane, float(np.median(band[own])))
-        if beyond.sum() >= SEEN_THROUGH_SHARE * inside.sum():
+        if (beyond & behind).sum() >= SEEN_THROUGH_SHARE * inside.sum():
             closed &= ~inside
     return closed
