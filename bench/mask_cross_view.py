@@ -30,9 +30,9 @@ import numpy as np  # noqa: E402 (after the path setup)
 
 from bench.mask_quality import LOW_IOU, MIN_VISIBLE, measured_code  # noqa: E402
 from bench.result_files import result_path  # noqa: E402
-from idpose_core.depth_fusion import cross_view_masks, fused_cloud, view_cloud  # noqa: E402
+from idpose_core.depth_fusion import MaskPass, cross_view_masks, fused_cloud, view_cloud  # noqa: E402
 from idpose_core.pipeline import PipelineSettings, mask_trusted  # noqa: E402
-from idpose_core.preprocessing import foreground_mask, mask_iou  # noqa: E402
+from idpose_core.preprocessing import ForegroundMask, foreground_mask, mask_iou  # noqa: E402
 from idpose_core.synthetic.catalogue import BENCH_HELDOUT, heldout_objects  # noqa: E402
 from idpose_core.synthetic.robot_views import pinhole_intrinsics  # noqa: E402
 from idpose_core.synthetic.scenes import demo_objects  # noqa: E402
@@ -67,27 +67,38 @@ def scene_views(index: int, seed: int, targets: str, stereo: bool) -> tuple[list
     return views, [f.target_mask for f in frames], np.stack([np.linalg.inv(cameras[0]) @ c for c in cameras])
 
 
+def second_pass(views: list[ViewInput], poses: np.ndarray) -> tuple[list[ForegroundMask], list[MaskPass], float] | None:
+    """The views' masks as the pipeline makes them, their clouds fused on ``poses`` as the pipeline fuses them (the
+    defaults: a view under ``min_mask_confidence`` stays out), and every view's second pass with the seconds it took;
+    None when no view has a cloud to fuse."""
+    minimum, voxel = PipelineSettings.min_mask_confidence, PipelineSettings.cloud_voxel_size
+    found = [foreground_mask(view) for view in views]
+    fused = [mask_trusted(item.confidence, minimum) for item in found]
+    clouds = [view_cloud(view, item.mask) for view, item in zip(views, found)]
+    kept = [k for k, cloud in enumerate(clouds) if cloud is not None and fused[k]]
+    if not kept:
+        return None
+    cloud = fused_cloud([clouds[k] for k in kept], [poses[k] for k in kept], voxel)
+    started = time.perf_counter()
+    done = cross_view_masks(views, [item.mask for item in found], poses, cloud.points, voxel, [True] * len(views),
+                            fused)
+    return found, done, time.perf_counter() - started
+
+
 def measure(seed: int, scenes: int, targets: str, stereo: bool) -> tuple[list[dict], float]:
     """Every view's IoU before and after the pass, and the pass's seconds per view."""
-    minimum, voxel = PipelineSettings.min_mask_confidence, PipelineSettings.cloud_voxel_size  # the defaults
     rows, seconds, passed = [], 0.0, 0
     for index in range(scenes):
         scene = scene_views(index, seed, targets, stereo)
         if scene is None:
             continue
         views, truth, poses = scene
-        found = [foreground_mask(view) for view in views]
-        fused = [mask_trusted(item.confidence, minimum) for item in found]
-        clouds = [view_cloud(view, item.mask) for view, item in zip(views, found)]
-        kept = [k for k, cloud in enumerate(clouds) if cloud is not None and fused[k]]
-        if not kept:
+        passes = second_pass(views, poses)
+        if passes is None:
             continue
-        cloud = fused_cloud([clouds[k] for k in kept], [poses[k] for k in kept], voxel)
-        started = time.perf_counter()
-        done = cross_view_masks(views, [item.mask for item in found], poses, cloud.points, voxel, [True] * len(views),
-                                fused)
-        seconds += time.perf_counter() - started
-        passed += len(views)
+        found, done, spent = passes
+        seconds += spent
+        passed += len(found)
         for k, (item, after) in enumerate(zip(found, done)):
             rows.append({"scene": index, "view": k, "before": mask_iou(item.mask, truth[k]),
                          "after": mask_iou(after.mask, truth[k]), "added": after.added, "removed": after.removed,

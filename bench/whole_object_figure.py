@@ -59,22 +59,12 @@ def overlay(rgb: np.ndarray, mask: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 def cross_view_panels() -> tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(title, image, mask before, mask after the pass, truth) of ``CROSS_VIEW_CASE``."""
-    from bench.mask_cross_view import scene_views
-    from idpose_core.depth_fusion import cross_view_masks, fused_cloud, view_cloud
-    from idpose_core.pipeline import PipelineSettings, mask_trusted
-    from idpose_core.preprocessing import foreground_mask
+    from bench.mask_cross_view import scene_views, second_pass
 
     title, seed, index, targets, stereo, k = CROSS_VIEW_CASE
     views, truth, poses = scene_views(index, seed, targets, stereo)
-    found = [foreground_mask(view) for view in views]
-    fused = [mask_trusted(item.confidence, PipelineSettings.min_mask_confidence) for item in found]
-    clouds = [view_cloud(view, item.mask) for view, item in zip(views, found)]
-    kept = [j for j, cloud in enumerate(clouds) if cloud is not None and fused[j]]
-    voxel = PipelineSettings.cloud_voxel_size
-    cloud = fused_cloud([clouds[j] for j in kept], [poses[j] for j in kept], voxel)
-    after = cross_view_masks(views, [item.mask for item in found], poses, cloud.points, voxel, [True] * len(views),
-                             fused)[k].mask
-    return title, views[k].rgb, found[k].mask, after, truth[k]
+    found, done, _ = second_pass(views, poses)
+    return title, views[k].rgb, found[k].mask, done[k].mask, truth[k]
 
 
 def main() -> None:

@@ -32,6 +32,7 @@ from idpose_core.noise_predictor import NoisePredictor
 from idpose_core.pose_hypotheses import VerificationSettings, verify_with_depth
 from idpose_core.preprocessing import PreprocessedViews, bounding_box, preprocess_views
 from idpose_core.segmentation import DepthSegmentationError, object_distance
+from idpose_core.segmentation.confidence import MIN_MASK_CONFIDENCE
 from idpose_core.solver import Progress, SampleCount, SolverConfig, SolverResult, estimate_poses
 from idpose_core.view_input import ViewInput
 
@@ -45,8 +46,6 @@ ANCHOR_POLAR_RANGE_DEG = (1.0, 179.0)  # the anchor polar angles accepted: strai
 # outermost row or column): 2 px more allows for a mask boundary that stops a pixel or two short of the edge
 # (anti-aliasing, depth holes along the frame). Such an object is cut off, and the model compares a part.
 BORDER_MARGIN_PX = 2
-MIN_MASK_CONFIDENCE = 0.9  # a depth cut with more than a tenth of the readings along its outline attached to what it
-# left out cannot vouch for the object it kept (no development view fell under it; see docs/robot_inputs.md)
 DEPTH_POSES = ("verify", "refine")  # how depth sets the poses: hypotheses from every source and one verifier, or
 # only the diffusion estimate refined by registration
 

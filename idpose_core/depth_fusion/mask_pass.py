@@ -58,14 +58,14 @@ def _points_in_anchor(view: ViewInput, pose: np.ndarray) -> tuple[np.ndarray, np
 def _grown(mask: np.ndarray, placed: np.ndarray, valid: np.ndarray, tree: cKDTree, reach: float) -> np.ndarray:
     """The readings outside ``mask`` within ``GROW_REACH_SHARE`` of its size that lie within ``reach`` (m) of the
     cloud (``tree``) and connect to the mask through others that do: the object's, which the view's cut missed."""
-    x, y, width, height = cv2.boundingRect(mask.astype(np.uint8))
+    _, _, width, height = cv2.boundingRect(mask.astype(np.uint8))
     grow = max(1, int(round(GROW_REACH_SHARE * np.hypot(width, height))))
     near = cv2.dilate(mask.astype(np.uint8), np.ones((2 * grow + 1,) * 2, np.uint8)).astype(bool) & valid & ~mask
     supported = np.zeros(mask.shape, bool)
     if near.any():
         distance, _ = tree.query(placed[near], distance_upper_bound=reach)
         supported[near] = distance <= reach
-    count, labels = cv2.connectedComponents((mask | supported).astype(np.uint8), connectivity=8)
+    _, labels = cv2.connectedComponents((mask | supported).astype(np.uint8), connectivity=8)
     touching = np.unique(labels[mask])
     return supported & np.isin(labels, touching[touching > 0])
 

@@ -14,8 +14,11 @@ def chromaticity(rgb: np.ndarray) -> np.ndarray:
     return chroma / chroma.sum(axis=-1, keepdims=True)
 
 
-def same_colour(chroma: np.ndarray, first: np.ndarray, second: np.ndarray) -> bool:
-    """Whether the regions ``first`` and ``second`` (H, W) bool of ``chroma`` (``chromaticity``) have median
-    chromaticities within ``OBJECT_CHROMA_DELTA``."""
-    return bool(np.linalg.norm(np.median(chroma[first], axis=0) - np.median(chroma[second], axis=0))
-                <= OBJECT_CHROMA_DELTA)
+def median_chromaticity(chroma: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(3,): the median chromaticity of ``chroma`` (``chromaticity``) over ``region`` (H, W) bool."""
+    return np.median(chroma[region], axis=0)
+
+
+def same_colour(first: np.ndarray, second: np.ndarray) -> bool:
+    """Whether two median chromaticities (``median_chromaticity``) lie within ``OBJECT_CHROMA_DELTA``."""
+    return bool(np.linalg.norm(first - second) <= OBJECT_CHROMA_DELTA)

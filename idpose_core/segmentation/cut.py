@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from idpose_core.segmentation.confidence import mask_confidence
+from idpose_core.segmentation.confidence import MIN_MASK_CONFIDENCE, mask_confidence
 from idpose_core.segmentation.errors import DepthSegmentationError
 from idpose_core.segmentation.footprint import recover_base
 from idpose_core.segmentation.grabcut import grabcut_refine
@@ -37,7 +37,6 @@ MIN_HEIGHT = 0.008  # m, or MIN_HEIGHT_SHARE of the depth when larger: standing 
 MIN_HEIGHT_SHARE = 0.015
 SUPPORT_HEIGHT = 0.05  # m, or 5 % of the depth when larger: a piece with enough points this close to the plane
 # (``stands``) stands on it (a curved bottom starts a few cm up); one without is carried by another piece
-TOUCHING_NOTE_SHARE = 0.1  # of the readings along the mask's outline: attached to it but left out, the note says so
 FOOT_BAND = 0.01  # m above the height test's threshold: each of two parts kept apart at a crease reaches this low
 # (a box's foot, a table's leg; not a marker low on a brick's side, which SUPPORT_HEIGHT would count as standing)
 
@@ -84,7 +83,7 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
                         threshold)
     mask = grabcut_refine(view.rgb, piece, on_plane, ~valid) if refine else piece
     confidence = mask_confidence(piece, points, valid, valid & (height > threshold))
-    if confidence < 1.0 - TOUCHING_NOTE_SHARE:
+    if confidence < MIN_MASK_CONFIDENCE:
         notes.append(f"something touching the object was left out ({100 * (1 - confidence):.0f} % of the readings "
                      "along its outline are attached to it)")
     return DepthCut(mask=mask, depth_mask=piece, plane=plane, note="; ".join(notes), confidence=confidence)

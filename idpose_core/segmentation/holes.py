@@ -41,6 +41,7 @@ def close_holes(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, height
     if not holes.any():
         return piece
     own = piece & valid
+    own_points, own_height, own_band = points[own], height[own], float(np.median(band[own]))
     count, labels = cv2.connectedComponents(holes.astype(np.uint8), connectivity=4)
     closed = piece | holes
     kernel = np.ones((3, 3), np.uint8)
@@ -51,7 +52,7 @@ def close_holes(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, height
         if not read.any() or not rim.any():
             continue
         behind = points[read][:, 2] > np.median(points[rim][:, 2])  # not a part standing out in front of the piece
-        beyond = seen_through(points[read], height[read], points[own], height[own], plane, float(np.median(band[own])))
+        beyond = seen_through(points[read], height[read], own_points, own_height, plane, own_band)
         if (beyond & behind).sum() >= SEEN_THROUGH_SHARE * inside.sum():
             closed &= ~inside
     return closed

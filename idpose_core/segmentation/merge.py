@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from idpose_core.segmentation.colour import chromaticity, same_colour
+from idpose_core.segmentation.colour import chromaticity, median_chromaticity, same_colour
 from idpose_core.segmentation.footprint import over_footprint
 from idpose_core.segmentation.pieces import stands
 from idpose_core.segmentation.plane import Plane, depth_tolerance
@@ -73,10 +73,9 @@ def _whole_of(piece: int, inside: np.ndarray, labels: np.ndarray, areas: np.ndar
     """The neighbour that a piece which does not stand (its pixels ``inside``) is a part of, or 0: one larger than
     it, or standing, that it shares more than ``MIN_SHARED_EDGE`` of its outline with and is attached to (its edge
     points within ``ATTACH_GAP`` of the neighbour's), where they meet standing out in front of it, or behind it
-    and either resting on it (``_rests_on``) or of its colour along the edge (``same_colour`` of ``chroma``: one
+    and either resting on it (``_rests_on``) or of its colour along the edge (``same_colour`` in ``chroma``: one
     object continued across a depth step); of several, the one with the longest shared edge."""
     kernel = np.ones((3, 3), np.uint8)
-    depth = np.where(valid, points[..., 2], 0.0)
     ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
     neighbours, shared = np.unique(labels[ring], return_counts=True)
     best, best_shared = 0, 0
@@ -88,9 +87,10 @@ def _whole_of(piece: int, inside: np.ndarray, labels: np.ndarray, areas: np.ndar
         behind = ring & (labels == other) & valid
         if length <= max(best_shared, MIN_SHARED_EDGE * ring.sum()) or not edge.any() or not behind.any():
             continue
-        in_front = np.median(depth[edge]) < np.median(depth[behind])
+        in_front = np.median(points[edge][:, 2]) < np.median(points[behind][:, 2])
         if ((in_front or _rests_on(points[inside & valid], points[(labels == other) & valid], plane)
-             or same_colour(chroma, edge, behind)) and _gap(points[edge], points[behind]) < _attach_gap(points[edge])):
+             or same_colour(median_chromaticity(chroma, edge), median_chromaticity(chroma, behind)))
+                and _gap(points[edge], points[behind]) < _attach_gap(points[edge])):
             best, best_shared = int(other), length
     return best
 

@@ -7,7 +7,7 @@ import math
 import cv2
 import numpy as np
 
-from idpose_core.segmentation.colour import chromaticity, same_colour
+from idpose_core.segmentation.colour import chromaticity, median_chromaticity, same_colour
 from idpose_core.segmentation.normals import surface_normals
 from idpose_core.segmentation.pieces import MIN_PIECE_SHARE, border_labels, nearest_index, stands
 
@@ -105,12 +105,13 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
             continue
         parts = _nearest_fill(_grown(np.where(np.isin(parts, large), parts, 0), inside), inside)
         alone = {part: stands(height[parts == part], footing[parts == part]) for part in large}
+        colour = {part: median_chromaticity(chroma, parts == part) for part in large}
         group = {part: part for part in large}
         for part in large:
             near = cv2.dilate((parts == part).astype(np.uint8), reach).astype(bool) & inside
             for other in np.unique(parts[near]):
                 apart = (alone[part] and alone[other]
-                         and not same_colour(chroma, parts == part, parts == other))
+                         and not same_colour(colour[part], colour[other]))
                 if other > part and not apart:
                     _union(group, part, int(other))
         roots = sorted({_root(group, part) for part in large}, key=lambda root: -areas[root])
