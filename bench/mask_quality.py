@@ -18,7 +18,9 @@ what makes segmentation hard:
   object's centre is 15 % nearer the image centre (only a region of interest says which object the view
   is about), without and with (crowded_roi) that box;
 - near_backdrop: a panel 0-4 cm behind the target's bounding ball, a wall it almost touches (parts of the
-  target that rise over it, such as a brick's studs seen from level, stand against the panel at a depth step).
+  target that rise over it, such as a brick's studs seen from level, stand against the panel at a depth step);
+- on_box: the target standing on a textured box of its own size (1-1.2 times its width and depth, 0.6-1.2 times its
+  height): one piece in depth with the box, or apart from it where a stereo camera reads nothing at the edge.
 
 Targets are the six demo objects in turn, or with ``--targets heldout`` the catalogue's held-out objects (parts:
 a generated head-and-body either way). The mask is what the

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Figure of whole objects: the depth cut before and after on a hole onto the room and on parts behind a depth step,
-and the masks' second pass across views on a part one view lost.
+"""Figure of whole objects: the depth cut before and after on a hole onto the room, on parts behind a depth step and
+on objects standing on a box, and the masks' second pass across views on a part one view lost.
 
 The single-view cases are views of ``bench/mask_quality.py`` (``CASES``); their "before" masks come from an earlier
 checkout, where this script, copied in, saves its own cut (``--save-masks FILE``: ``depth_cut``, which both
@@ -35,6 +35,8 @@ CASES = (  # (title, challenge, scene index, targets, stereo)
     ("a mug's handle (demo, clutter 2)", "clutter", 2, "demo", False),
     ("a held-out toy, parts behind a step (clutter 0)", "clutter", 0, "heldout", False),
     ("a held-out toy before a wall (near_backdrop 0)", "near_backdrop", 0, "heldout", False),
+    ("a duck on a box (demo, on_box 0)", "on_box", 0, "demo", False),
+    ("a held-out object on a box, stereo (on_box 2)", "on_box", 2, "heldout", True),
 )
 CROSS_VIEW_CASE = ("second pass: a part one view lost", 5151, 1, "heldout", False, 0)  # held-out scene 1, view 0
 

@@ -4,12 +4,14 @@ aligned depth image and no learnt weights.
 Back-project the depth with the intrinsics, find the support plane by RANSAC (the largest plane whose
 normal points up: along gravity when it is known, else towards the top of the image), keep what
 stands above it, split that into connected pieces at depth jumps (an object in front of another is a
-different piece) and at concave folds between two objects that each stand on the table (a box touching
-the target where no depth jump parts them), give a piece that does not reach the plane back to the piece
+different piece) and at concave folds between two objects of different colours that each stand on the table
+(a box touching the target where no depth jump parts them) or of which one rests on the other's top (a duck on a
+box), give a piece that does not reach the plane back to the piece
 it stands out in front of and touches (a duck's head in front of its body: a part, not an object), leave
 out what runs out of the image upwards (a wall whose top the camera does not see; an object of any size
 shows its top), take the target's piece (the one in the region of interest, else the one nearest the image
-centre), give it back its base (the bottom centimetre, under the height test's threshold: over its
+centre) with what rests on it (a block on a desk; what it rests on stays out, as the table does), give it back its
+base (the bottom centimetre, under the height test's threshold: over its
 footprint, not facing up), close its holes but those the camera sees the table or the room through (a mug's
 handle) and let GrabCut, seeded from it, settle the boundary the depth leaves ragged.
 Tolerances grow with each reading's depth, not the image's: a far wall does not loosen them. Depth is in metres
@@ -23,12 +25,13 @@ import numpy as np
 
 from idpose_core.segmentation.confidence import MIN_MASK_CONFIDENCE, mask_confidence
 from idpose_core.segmentation.errors import DepthSegmentationError
-from idpose_core.segmentation.footprint import recover_base
+from idpose_core.segmentation.footprint import faces_up, recover_base
 from idpose_core.segmentation.grabcut import grabcut_refine
 from idpose_core.segmentation.holes import close_holes
 from idpose_core.segmentation.merge import merge_carried_pieces
 from idpose_core.segmentation.pieces import connected_pieces, nearest_index
 from idpose_core.segmentation.plane import PLANE_TOLERANCE, Plane, backproject, depth_tolerance, support_plane
+from idpose_core.segmentation.stacking import with_what_it_carries
 from idpose_core.segmentation.target import drop_scenery, nearer_the_centre, target_piece
 from idpose_core.segmentation.touching import split_touching
 from idpose_core.view_input import ViewInput
@@ -69,20 +72,25 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     nearest = nearest_index(valid)
     count, labels = connected_pieces(valid & (height > threshold), depth, valid, nearest)
     known_height = height.ravel()[nearest]  # a hole has its nearest reading's height
-    count, labels, apart = split_touching(labels, count, points, known_height, threshold + FOOT_BAND, view.rgb)
-    labels = merge_carried_pieces(labels, count, known_height, points, valid,
-                                  depth_tolerance(depth, SUPPORT_HEIGHT, 0.05), plane, view.rgb, apart)
+    up = faces_up(points, valid, plane)
+    count, labels, apart, stacked = split_touching(labels, count, points, known_height, threshold + FOOT_BAND,
+                                                   view.rgb, valid, up, plane)
+    resting = [(labels == upper, labels == carrier) for upper, carrier in stacked]
+    labels, resting_apart = merge_carried_pieces(labels, count, known_height, points, valid,
+                                                 depth_tolerance(depth, SUPPORT_HEIGHT, 0.05), plane, view.rgb, up,
+                                                 apart)
+    resting += resting_apart
     on_plane = valid & (np.abs(height) < depth_tolerance(depth, PLANE_TOLERANCE, 0.01))
     kept = drop_scenery(labels, count, known_height, plane)
-    piece = target_piece(kept, count, view.roi)
+    piece, support = with_what_it_carries(target_piece(kept, count, view.roi), labels, resting, view.roi)
     notes = []
     if view.roi is None and nearer_the_centre(labels & (kept == 0), piece):
         notes.append("the piece nearest the image centre runs out of the image upwards and was left out as the room "
                      "(an object cut off at the image's top?)")
-    piece = close_holes(recover_base(piece, points, valid, height, plane, threshold), points, valid, height, plane,
+    piece = close_holes(recover_base(piece, points, valid, height, plane, threshold, up), points, valid, height, plane,
                         threshold)
     mask = grabcut_refine(view.rgb, piece, on_plane, ~valid) if refine else piece
-    confidence = mask_confidence(piece, points, valid, valid & (height > threshold))
+    confidence = mask_confidence(piece, points, valid, valid & (height > threshold) & ~support)
     if confidence < MIN_MASK_CONFIDENCE:
         notes.append(f"something touching the object was left out ({100 * (1 - confidence):.0f} % of the readings "
                      "along its outline are attached to it)")

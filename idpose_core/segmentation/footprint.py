@@ -15,6 +15,7 @@ BASE_MARGIN = 0.002  # m, or 0.4 % of the depth when larger: how far outside the
 FOOTPRINT_CELL = 0.001  # m: the grid the footprint is drawn on
 BASE_SLICE = 0.02  # m above the height threshold: the piece's points that draw its footprint (higher up, an
 # overhang such as a duck's head covers table that shows beneath it)
+REST_MARGIN = 0.01  # m: a part resting on a piece lies over its footprint grown by this (a head overhangs a little)
 TABLE_TILT_DEG = 35.0  # a reading whose surface tilts less than this from the plane's normal faces up: the table
 # (under a rounded bottom, inside the footprint), not the object's side or underside
 
@@ -48,6 +49,15 @@ def over_footprint(object_points: np.ndarray, points: np.ndarray, plane: Plane, 
     return over
 
 
+def rests_on(piece_points: np.ndarray, other_points: np.ndarray, plane: Plane) -> bool:
+    """Whether most of ``piece_points`` (N, 3) lie over the footprint of ``other_points`` (M, 3) on the plane, grown
+    by ``REST_MARGIN``: on top of the other piece (a brick's studs, a duck's head seen from low, a duck on a box),
+    not beside or behind it (which stands beyond its footprint)."""
+    if len(piece_points) < 3 or len(other_points) < 3:
+        return False
+    return bool(over_footprint(other_points, piece_points, plane, REST_MARGIN).mean() > 0.5)
+
+
 def faces_up(points: np.ndarray, valid: np.ndarray, plane: Plane) -> np.ndarray:
     """(H, W) bool: the surface at each reading tilts less than ``TABLE_TILT_DEG`` from the plane's normal
     (``surface_normals``; False where a neighbour has no reading)."""
@@ -56,16 +66,16 @@ def faces_up(points: np.ndarray, valid: np.ndarray, plane: Plane) -> np.ndarray:
 
 
 def recover_base(piece: np.ndarray, points: np.ndarray, valid: np.ndarray, height: np.ndarray, plane: Plane,
-                 band: np.ndarray) -> np.ndarray:
+                 band: np.ndarray, up: np.ndarray) -> np.ndarray:
     """The piece (H, W) bool with its base: the readings under the height test's threshold (``band`` (H, W), m)
-    whose surface does not face up (``faces_up``: the table) and that lie over the piece's footprint on the plane
-    (the convex hull, seen from above, of its points up to ``BASE_SLICE`` higher, grown by ``BASE_MARGIN``) and
-    connect to it in the image: the bottom centimetre of the object, which the height test cannot tell from the
-    table."""
+    whose surface does not face up (``up`` (H, W), ``faces_up``: the table) and that lie over the piece's footprint
+    on the plane (the convex hull, seen from above, of its points up to ``BASE_SLICE`` higher, grown by
+    ``BASE_MARGIN``) and connect to it in the image: the bottom centimetre of the object, which the height test
+    cannot tell from the table."""
     footing = points[piece & valid & (height <= band + BASE_SLICE)]
     if len(footing) < 3:
         return piece
-    low = valid & ~piece & (height <= band) & (height > -band) & ~faces_up(points, valid, plane)
+    low = valid & ~piece & (height <= band) & (height > -band) & ~up
     margin = float(np.max(depth_tolerance(points[..., 2][piece & valid], BASE_MARGIN, 0.004)))
     rows, cols = np.nonzero(low)
     over = over_footprint(footing, points[rows, cols], plane, margin)

@@ -6,9 +6,10 @@ import cv2
 import numpy as np
 
 from idpose_core.segmentation.colour import chromaticity, median_chromaticity, same_colour
-from idpose_core.segmentation.footprint import over_footprint
+from idpose_core.segmentation.footprint import over_footprint, rests_on
 from idpose_core.segmentation.pieces import stands
 from idpose_core.segmentation.plane import Plane, depth_tolerance
+from idpose_core.segmentation.stacking import resting_top
 
 ATTACH_GAP = 0.08  # m, or ATTACH_GAP_SHARE of the depth when larger: a carried piece's edge points lie this close
 # to the piece carrying it (median); a head on a 20 cm body comes within 5 cm, a ball before a box that stands apart
@@ -18,7 +19,6 @@ CARRIER_INSET = 0.003  # m: a neighbour carries a piece from beneath when most o
 # edge lie this far inside the piece's footprint (a table's legs under its top; a box behind the top lies outside)
 MIN_SHARED_EDGE = 0.05  # of a carried piece's outline: it touches what carries it along more than this (a table
 # top that touches a crate behind it at one corner is not carried by the crate)
-REST_MARGIN = 0.01  # m: a part resting on a piece lies over its footprint grown by this (a head overhangs a little)
 GAP_POINTS = 400  # of each side, for the gap between two sets of points
 
 
@@ -34,15 +34,6 @@ def _attach_gap(edge: np.ndarray) -> float:
     """The most a piece's ``edge`` points (N, 3) may lie from a piece they are attached to (m): ``ATTACH_GAP``, or
     its share of their median depth when larger."""
     return float(depth_tolerance(np.median(edge[:, 2]), ATTACH_GAP, ATTACH_GAP_SHARE))
-
-
-def _rests_on(piece_points: np.ndarray, other_points: np.ndarray, plane: Plane) -> bool:
-    """Whether most of ``piece_points`` (N, 3) lie over the footprint of ``other_points`` (M, 3) on the plane, grown
-    by ``REST_MARGIN``: a part on top of the other piece (a brick's studs, a duck's head seen from low, behind the
-    front it rises over), not an object behind it (which stands beyond its footprint)."""
-    if len(piece_points) < 3 or len(other_points) < 3:
-        return False
-    return bool(over_footprint(other_points, piece_points, plane, REST_MARGIN).mean() > 0.5)
 
 
 def _carriers_beneath(piece: int, inside: np.ndarray, ring: np.ndarray, labels: np.ndarray, height: np.ndarray,
@@ -73,7 +64,7 @@ def _whole_of(piece: int, inside: np.ndarray, labels: np.ndarray, areas: np.ndar
     """The neighbour that a piece which does not stand (its pixels ``inside``) is a part of, or 0: one larger than
     it, or standing, that it shares more than ``MIN_SHARED_EDGE`` of its outline with and is attached to (its edge
     points within ``ATTACH_GAP`` of the neighbour's), where they meet standing out in front of it, or behind it
-    and either resting on it (``_rests_on``) or of its colour along the edge (``same_colour`` in ``chroma``: one
+    and either resting on it (``rests_on``) or of its colour along the edge (``same_colour`` in ``chroma``: one
     object continued across a depth step); of several, the one with the longest shared edge."""
     kernel = np.ones((3, 3), np.uint8)
     ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
@@ -88,7 +79,7 @@ def _whole_of(piece: int, inside: np.ndarray, labels: np.ndarray, areas: np.ndar
         if length <= max(best_shared, MIN_SHARED_EDGE * ring.sum()) or not edge.any() or not behind.any():
             continue
         in_front = np.median(points[edge][:, 2]) < np.median(points[behind][:, 2])
-        if ((in_front or _rests_on(points[inside & valid], points[(labels == other) & valid], plane)
+        if ((in_front or rests_on(points[inside & valid], points[(labels == other) & valid], plane)
              or same_colour(median_chromaticity(chroma, edge), median_chromaticity(chroma, behind)))
                 and _gap(points[edge], points[behind]) < _attach_gap(points[edge])):
             best, best_shared = int(other), length
@@ -96,9 +87,11 @@ def _whole_of(piece: int, inside: np.ndarray, labels: np.ndarray, areas: np.ndar
 
 
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
-                         valid: np.ndarray, support: np.ndarray, plane: Plane, rgb: np.ndarray,
-                         apart: frozenset[tuple[int, int]] = frozenset()) -> np.ndarray:
-    """The labels with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
+                         valid: np.ndarray, support: np.ndarray, plane: Plane, rgb: np.ndarray, up: np.ndarray,
+                         apart: frozenset[tuple[int, int]] = frozenset()
+                         ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """(the labels, the pixels (H, W) bool of each piece kept apart from the piece whose top it rests on paired with
+    that piece's) with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
     table top and its legs), then every piece that still does not reach the plane (``stands``: too few of its
     points within ``support`` (H, W), m) joined to the neighbouring piece it is a part of (``_whole_of``: it stands
     out in front of it, or rests on it or continues its colour behind it, attached; ``rgb`` (H, W, 3)), until none
@@ -106,14 +99,31 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     (a duck's head and back, larger than the breast below them; a brick's studs seen from level, behind its front
     face, and the marker on them). A piece behind its neighbour and beyond its footprint stays apart (an object
     partly hidden by the target), and so does one that is well in front of it (a ball whose lowest visible points
-    are high on its curve, before a box behind it). Pieces that ``apart`` pairs (``split_touching``: two objects)
-    never join, nor do the pieces they have joined."""
+    are high on its curve, before a box behind it). A piece that rests on the top of a standing piece of another
+    colour (``resting_top``; ``up`` (H, W): the readings that face up) is another object, never joined to it (a duck
+    on a box, apart from it in depth). Pieces that ``apart`` pairs (``split_touching``: two objects) never join, nor
+    do the pieces they have joined."""
     labels = labels.copy()
     chroma = chromaticity(rgb)
     owner = np.arange(count)  # the piece each original piece has joined
+    kept_apart = set(apart)
+    resting: list[tuple[np.ndarray, np.ndarray]] = []
 
     def may_join(piece: int, other: int) -> bool:
-        return not any({owner[first], owner[second]} == {piece, other} for first, second in apart)
+        return not any({owner[first], owner[second]} == {piece, other} for first, second in kept_apart)
+
+    def rests_apart(upper: int, carrier: int) -> bool:
+        """Whether ``upper`` rests on the top of ``carrier``, which stands, each of its own colour: two objects
+        (``resting_top``), kept apart and recorded."""
+        upper_pixels, carrier_pixels = labels == upper, labels == carrier
+        if not standing[carrier] or same_colour(median_chromaticity(chroma, upper_pixels),
+                                                median_chromaticity(chroma, carrier_pixels)):
+            return False
+        if resting_top(upper_pixels & valid, carrier_pixels & valid, points, height, up, plane) is None:
+            return False
+        kept_apart.add((upper, carrier))
+        resting.append((upper_pixels, carrier_pixels))
+        return True
 
     kernel = np.ones((3, 3), np.uint8)
     areas = np.bincount(labels.ravel(), minlength=count)
@@ -127,7 +137,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
         inside = labels == piece
         ring = cv2.dilate(inside.astype(np.uint8), kernel, iterations=2).astype(bool) & ~inside
         for other in _carriers_beneath(piece, inside, ring, labels, height, points, valid, plane):
-            if areas[other] < areas[piece] and may_join(piece, other):
+            if areas[other] < areas[piece] and may_join(piece, other) and not rests_apart(piece, other):
                 labels[labels == other] = piece
                 owner[owner == other] = piece
                 areas[piece] += areas[other]
@@ -141,10 +151,12 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
                 continue
             inside = labels == piece
             best = _whole_of(piece, inside, labels, areas, standing, points, valid, plane, chroma, may_join)
+            while best and rests_apart(piece, best):  # a duck on a box: not a part of it, maybe of another
+                best = _whole_of(piece, inside, labels, areas, standing, points, valid, plane, chroma, may_join)
             if best:
                 labels[inside] = best
                 owner[owner == piece] = best
                 areas[best] += areas[piece]
                 areas[piece] = 0
                 joined = True
-    return labels
+    return labels, resting

@@ -1,5 +1,5 @@
 """Pieces cut apart where two objects touch without a depth jump: along concave creases and thin necks, kept
-apart only when both parts stand on the plane and differ in colour."""
+apart only when the parts differ in colour and both stand on the plane, or one rests on the other's top."""
 from __future__ import annotations
 
 import math
@@ -10,6 +10,8 @@ import numpy as np
 from idpose_core.segmentation.colour import chromaticity, median_chromaticity, same_colour
 from idpose_core.segmentation.normals import surface_normals
 from idpose_core.segmentation.pieces import MIN_PIECE_SHARE, border_labels, nearest_index, stands
+from idpose_core.segmentation.plane import Plane
+from idpose_core.segmentation.stacking import lifted_off, resting_top
 
 CREASE_STEP = 4  # px either side of a reading: the two surface points a concave crease is judged between
 CREASE_NORMAL_STEP = 2  # px either side for their normals' finite differences
@@ -79,20 +81,26 @@ def _grown(seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
 
 
 def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: np.ndarray, footing: np.ndarray,
-                   rgb: np.ndarray) -> tuple[int, np.ndarray, frozenset[tuple[int, int]]]:
-    """(count, labels, the pairs of labels cut apart) with pieces cut apart where two objects touch without a depth
-    jump. A piece is cut along its concave creases (``concave_creases``) and its thin necks (``_opened``) into parts
-    (smaller ones, and the cut, go to the nearest large part); two neighbouring parts stay apart only when each
-    stands on the plane by itself (``stands``: its ``height`` (H, W) under ``footing`` (H, W)) and their median
-    chromaticities differ by more than ``OBJECT_CHROMA_DELTA``: two objects side by side (a box against a toy
-    table's top). Otherwise they join again: a duck's head and body (one stands), a marker on a ball, a table's
-    legs and top (too thin to be a large part). A piece that runs out of the image is left whole: what lies beyond
-    cannot be judged (a wall behind the table, its tiles in different colours)."""
+                   rgb: np.ndarray, valid: np.ndarray, up: np.ndarray, plane: Plane
+                   ) -> tuple[int, np.ndarray, frozenset[tuple[int, int]], frozenset[tuple[int, int]]]:
+    """(count, labels, the pairs of labels cut apart, the pairs (upper, carrier) of those where one rests on the
+    other's top) with pieces cut apart where two objects touch without a depth jump. A piece is cut along its
+    concave creases (``concave_creases``) and its thin necks (``_opened``) into parts (smaller ones, and the cut,
+    go to the nearest large part); two neighbouring parts whose median chromaticities differ by more than
+    ``OBJECT_CHROMA_DELTA`` stay apart when each stands on the plane by itself (``stands``: its ``height`` (H, W)
+    under ``footing`` (H, W)): two objects side by side (a box against a toy table's top); or when one stands and
+    the other rests on its top (``resting_top``: a duck on a box, a block on a desk; ``valid`` (H, W): the readings,
+    ``up`` (H, W): those that face up, ``faces_up`` on the support ``plane``; what of the carrier stands above its
+    top goes to the part resting there, ``lifted_off``). Otherwise they join again: a duck's head and body (one
+    stands), a marker on a ball, a table's legs and top (too thin to be a large part). A piece that runs out of the
+    image is left whole: what lies beyond cannot be judged (a wall behind the table, its tiles in different
+    colours)."""
     crease = cv2.dilate(concave_creases(points, labels).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     crease |= (labels > 0) & ~_opened(labels)  # a cut with no gaps, and the thin necks where two objects meet
     cut_pairs: set[tuple[int, int]] = set()
+    resting: set[tuple[int, int]] = set()
     if not crease.any():
-        return count, labels, frozenset(cut_pairs)
+        return count, labels, frozenset(cut_pairs), frozenset(resting)
     chroma = chromaticity(rgb)
     labels = labels.copy()
     reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (4 * CREASE_STEP + 1,) * 2)
@@ -107,20 +115,50 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
         alone = {part: stands(height[parts == part], footing[parts == part]) for part in large}
         colour = {part: median_chromaticity(chroma, parts == part) for part in large}
         group = {part: part for part in large}
+        mixed = []  # neighbours of two colours, one standing: one may rest on the other's top
         for part in large:
             near = cv2.dilate((parts == part).astype(np.uint8), reach).astype(bool) & inside
-            for other in np.unique(parts[near]):
-                apart = (alone[part] and alone[other]
-                         and not same_colour(colour[part], colour[other]))
-                if other > part and not apart:
-                    _union(group, part, int(other))
+            for other in (int(other) for other in np.unique(parts[near]) if other > part):
+                if same_colour(colour[part], colour[other]) or not (alone[part] or alone[other]):
+                    _union(group, part, other)
+                elif alone[part] != alone[other]:
+                    mixed.append((other, part) if alone[part] else (part, other))
+        stacked = _stacked_groups(mixed, group, parts, points, height, valid, up, plane)
         roots = sorted({_root(group, part) for part in large}, key=lambda root: -areas[root])
         new = [int(piece)] + [count + index for index in range(len(roots) - 1)]
         for label, root in zip(new[1:], roots[1:]):
-            labels[inside & np.isin(parts, [part for part in large if _root(group, part) == root])] = label
+            labels[inside & np.isin(parts, _members(group, root))] = label
+        label_of = dict(zip(roots, new))
+        resting |= {(label_of[_root(group, upper)], label_of[_root(group, carrier)]) for upper, carrier in stacked
+                    if _root(group, upper) != _root(group, carrier)}
         cut_pairs |= {(first, second) for index, first in enumerate(new) for second in new[index + 1:]}
         count += len(roots) - 1
-    return count, labels, frozenset(cut_pairs)
+    return count, labels, frozenset(cut_pairs), frozenset(resting)
+
+
+def _stacked_groups(mixed: list[tuple[int, int]], group: dict[int, int], parts: np.ndarray, points: np.ndarray,
+                    height: np.ndarray, valid: np.ndarray, up: np.ndarray, plane: Plane) -> set[tuple[int, int]]:
+    """The pairs (upper, carrier) of ``mixed`` pairs of parts (``parts`` (H, W) labels) whose groups (``group``,
+    joined by colour so far) are two objects, the upper one resting on the carrier's top (``resting_top``: a duck,
+    head and body, on a box); what of the carrier stands above its top goes to the upper part (``lifted_off``, in
+    ``parts``). The groups of every other pair are joined (a duck's head on its body)."""
+    stacked = set()
+    for upper, carrier in mixed:
+        if _root(group, upper) == _root(group, carrier):
+            continue
+        upper_pixels, carrier_pixels = (np.isin(parts, _members(group, side)) for side in (upper, carrier))
+        top = resting_top(upper_pixels & valid, carrier_pixels & valid, points, height, up, plane)
+        if top is None:
+            _union(group, upper, carrier)
+        else:
+            stacked.add((upper, carrier))
+            parts[lifted_off(upper_pixels, carrier_pixels, height, top)] = upper
+    return stacked
+
+
+def _members(group: dict[int, int], part: int) -> list[int]:
+    """The parts in ``part``'s group."""
+    return [member for member in group if _root(group, member) == _root(group, part)]
 
 
 def _root(group: dict[int, int], part: int) -> int:

@@ -5,7 +5,8 @@ background scenes), world up +z; the table top lies under the target, the room's
 it and four textured walls around. Distractors stand on the table around the target, one of them
 close behind it as seen from the first camera. ``challenge`` layouts stage what makes depth segmentation
 hard: a target with a part standing out towards the camera, a box touching the target, a backdrop panel
-10-30 cm behind it; ``off_centre_camera`` aims a camera beside the target, no distractor nearer the centre.
+10-30 cm behind it, the target standing on a box of its own size; ``off_centre_camera`` aims a camera beside the
+target, no distractor nearer the centre.
 A render gives the colour image (no alpha), the depth
 along the optical axis in metres, and the target's true mask.
 """
@@ -40,9 +41,11 @@ WALL_HEIGHT = 2.5  # m
 TABLE_TEXTURES = ("table/table.png", "checker_grid.jpg", "tray/tray.jpg", "domino/domino.jpg")
 WALL_TEXTURES = ("tex256.png", "uvmap.png", "checker_blue.png", "jenga/jenga.png", "cube.png")
 DISTRACTOR_TEXTURES = ("jenga/jenga.png", "domino/domino.jpg", "checker_blue.png", "uvmap.png")
-CHALLENGES = ("clutter", "parts", "touching", "backdrop", "off_centre", "near_backdrop")
+CHALLENGES = ("clutter", "parts", "touching", "backdrop", "off_centre", "near_backdrop", "on_box")
 BACKDROP_GAP = (0.10, 0.30)  # m from the target's bounding ball to the backdrop panel
 NEAR_BACKDROP_GAP = (0.0, 0.04)  # m, for "near_backdrop": a target a few centimetres in front of a wall
+PEDESTAL_WIDTH = (1.0, 1.2)  # of the target's width and depth: for "on_box", the box under it (its own size)
+PEDESTAL_HEIGHT = (0.6, 1.2)  # of the target's height
 OFF_CENTRE = (0.3, 0.65)  # of the way from the image centre to its edge: where an off-centre target's centre sits
 FAIR_MARGIN = 0.15  # of that way: how much farther out than the target every distractor's centre is
 AIM_TRIES = 100
@@ -77,11 +80,26 @@ class TabletopLayout:
     table: bool = True  # False: everything stands on the floor (an object too big for a table)
 
 
-def half_height(spec: ObjectSpec, radius: float) -> float:
-    """Half the height (m) of the object's bounding box once fitted into a ball of ``radius``."""
+def half_extents(spec: ObjectSpec, radius: float) -> np.ndarray:
+    """Half the sides (3,) (m) of the object's bounding box once fitted into a ball of ``radius``."""
     vertices = np.concatenate([_part_vertices(part) for part in spec.parts])
     _, factor = normalisation(spec)
-    return 0.5 * float(np.ptp(vertices[:, 2])) * factor * radius / OBJECT_RADIUS
+    return 0.5 * np.ptp(vertices, axis=0) * factor * radius / OBJECT_RADIUS
+
+
+def half_height(spec: ObjectSpec, radius: float) -> float:
+    """Half the height (m) of the object's bounding box once fitted into a ball of ``radius``."""
+    return float(half_extents(spec, radius)[2])
+
+
+def _pedestal(rng: np.random.Generator, target: ObjectSpec, target_radius: float) -> Placement:
+    """A textured box of the target's own size right under it (``PEDESTAL_WIDTH``, ``PEDESTAL_HEIGHT``): the target
+    stands on its top, the box on the table."""
+    half = half_extents(target, target_radius)
+    sides = (*(2 * half[:2] * rng.uniform(*PEDESTAL_WIDTH, size=2)), 2 * half[2] * float(rng.uniform(*PEDESTAL_HEIGHT)))
+    spec = ObjectSpec("pedestal", (Part("cube.obj", scale=tuple(float(v) for v in sides),
+                                        texture=DISTRACTOR_TEXTURES[int(rng.integers(len(DISTRACTOR_TEXTURES)))]),))
+    return Placement(spec, (0.0, 0.0, -half[2] - sides[2] / 2), 0.5 * float(np.linalg.norm(sides)))
 
 
 def _distractor_pool(rng: np.random.Generator, count: int) -> list[ObjectSpec]:
@@ -136,21 +154,23 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
     ``challenge`` (``CHALLENGES``): "parts" turns the target's front (+x) towards ``behind_azimuth``;
     "touching" puts the first distractor, a box, against the target's side as seen from there; "backdrop"
     adds a panel 10-30 cm behind the target, "near_backdrop" 0-4 cm behind its bounding ball (a wall it almost
-    touches); "clutter" and "off_centre" (a matter of the camera) add nothing.
+    touches); "on_box" stands the target on a box of its own size (the table that much lower, the box the first
+    placement); "clutter" and "off_centre" (a matter of the camera) add nothing.
     ``random_lighting`` False lights the scene with ``TRAINING_LIGHT`` (the light is drawn either way, so the
     rest of the layout is the same). ``target_radius`` (m): the ball the target fits (distractors keep their sizes
     and stand around it); ``table`` False stands everything on the floor (a chair before a mobile robot).
     """
     if challenge not in CHALLENGES:
         raise ValueError(f"challenge must be one of {', '.join(CHALLENGES)}, got {challenge!r}")
-    table_top = -half_height(target, target_radius)
-    placed: list[Placement] = []
+    placed: list[Placement] = [_pedestal(rng, target, target_radius)] if challenge == "on_box" else []
+    table_top = -half_height(target, target_radius) - sum(2 * half_height(p.spec, p.radius) for p in placed)
     count = int(rng.integers(2, 5))
     pool = _distractor_pool(rng, count)
     if challenge == "touching":
         sides = tuple(float(v) for v in rng.uniform(0.5, 1.0, size=3))
         pool[0] = ObjectSpec("box_touching", (Part("cube.obj", scale=sides, texture=DISTRACTOR_TEXTURES[
             int(rng.integers(len(DISTRACTOR_TEXTURES)))]),))
+    reach = max([target_radius] + [float(np.hypot(*half_extents(p.spec, p.radius)[:2])) for p in placed])
     for k, spec in enumerate(pool):
         radius = float(rng.uniform(0.05, 0.1))
         for _ in range(100):
@@ -158,8 +178,8 @@ def random_layout(target: ObjectSpec, rng: np.random.Generator, behind_azimuth: 
                 side = 1.0 if rng.random() < 0.5 else -1.0
                 distance = 0.8 * (target_radius + radius)
                 azimuth = behind_azimuth + side * (math.pi / 2 + rng.uniform(-0.4, 0.4))
-            elif k == 0:
-                distance, azimuth = target_radius + radius + 0.02, behind_azimuth + math.pi + rng.uniform(-0.3, 0.3)
+            elif k == 0:  # close behind what stands at the centre (the target, or the box under it)
+                distance, azimuth = reach + radius + 0.02, behind_azimuth + math.pi + rng.uniform(-0.3, 0.3)
             else:
                 distance, azimuth = target_radius + rng.uniform(0.1, 0.4), rng.uniform(0.0, 2.0 * math.pi)
             x, y = distance * math.cos(azimuth), distance * math.sin(azimuth)
