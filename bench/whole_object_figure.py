@@ -1,14 +1,15 @@
 #!/usr/bin/env python3
-"""Figure of whole objects: the depth cut before and after on a hole onto the room, on parts behind a depth step and
-on objects standing on a box, and the masks' second pass across views on a part one view lost.
+"""Figures of whole objects: the depth cut before and after on a hole onto the room and on parts behind a depth step,
+and the masks' second pass across views on a part one view lost (``--figure whole_objects``); on objects standing on
+a box (``--figure objects_on_boxes``).
 
-The single-view cases are views of ``bench/mask_quality.py`` (``CASES``); their "before" masks come from an earlier
+The single-view cases are views of ``bench/mask_quality.py`` (``FIGURES``); their "before" masks come from an earlier
 checkout, where this script, copied in, saves its own cut (``--save-masks FILE``: ``depth_cut``, which both
 versions have). The cross-view case is a view of ``bench/mask_cross_view.py`` (``CROSS_VIEW_CASE``), before and after
-its pass with the code here. Writes bench/results/mask_quality/whole_objects.png.
+its pass with the code here. Writes bench/results/mask_quality/<figure>.png.
 
-    python bench/whole_object_figure.py --save-masks /tmp/before.npz   # in the earlier checkout
-    python bench/whole_object_figure.py --before /tmp/before.npz       # here
+    python bench/whole_object_figure.py --figure F --save-masks /tmp/before.npz   # in the earlier checkout
+    python bench/whole_object_figure.py --figure F --before /tmp/before.npz       # here
 """
 from __future__ import annotations
 
@@ -31,20 +32,25 @@ from idpose_core.preprocessing import mask_iou  # noqa: E402
 from idpose_core.segmentation import depth_cut  # noqa: E402
 
 SEED = 31337  # the seed of the runs in docs/robot_inputs.md#whole-objects
-CASES = (  # (title, challenge, scene index, targets, stereo)
-    ("a mug's handle (demo, clutter 2)", "clutter", 2, "demo", False),
-    ("a held-out toy, parts behind a step (clutter 0)", "clutter", 0, "heldout", False),
-    ("a held-out toy before a wall (near_backdrop 0)", "near_backdrop", 0, "heldout", False),
-    ("a duck on a box (demo, on_box 0)", "on_box", 0, "demo", False),
-    ("a held-out object on a box, stereo (on_box 2)", "on_box", 2, "heldout", True),
-)
+FIGURES = {  # per figure, its cases: (title, challenge, scene index, targets, stereo)
+    "whole_objects": (
+        ("a mug's handle (demo, clutter 2)", "clutter", 2, "demo", False),
+        ("a held-out toy, parts behind a step (clutter 0)", "clutter", 0, "heldout", False),
+        ("a held-out toy before a wall (near_backdrop 0)", "near_backdrop", 0, "heldout", False),
+    ),
+    "objects_on_boxes": (
+        ("a duck on a box (demo, on_box 0)", "on_box", 0, "demo", False),
+        ("a teddy on a box, stereo (demo, on_box 1)", "on_box", 1, "demo", True),
+        ("a held-out object on a box, stereo (on_box 2)", "on_box", 2, "heldout", True),
+    ),
+}
 CROSS_VIEW_CASE = ("second pass: a part one view lost", 5151, 1, "heldout", False, 0)  # held-out scene 1, view 0
 
 
-def case_views() -> list[tuple]:
-    """(title, view, true mask) of each single-view case."""
+def case_views(figure: str) -> list[tuple]:
+    """(title, view, true mask) of each single-view case of ``figure``."""
     found = []
-    for title, challenge, index, targets, stereo in CASES:
+    for title, challenge, index, targets, stereo in FIGURES[figure]:
         view, truth = challenge_view(challenge, index, SEED, 320, stereo=stereo, targets=targets)
         found.append((title, view, truth))
     return found
@@ -71,10 +77,11 @@ def cross_view_panels() -> tuple[str, np.ndarray, np.ndarray, np.ndarray, np.nda
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--figure", choices=tuple(FIGURES), default="whole_objects")
     parser.add_argument("--save-masks", type=Path, help="save this checkout's masks of the cases and stop")
     parser.add_argument("--before", type=Path, help="the masks an earlier checkout saved")
     args = parser.parse_args()
-    cases = case_views()
+    cases = case_views(args.figure)
     if args.save_masks:
         np.savez_compressed(args.save_masks, *[depth_cut(view).mask for _, view, _ in cases])
         print(args.save_masks)
@@ -84,7 +91,8 @@ def main() -> None:
     before = np.load(args.before)
     rows = [(title, view.rgb, before[f"arr_{k}"], depth_cut(view).mask, truth)
             for k, (title, view, truth) in enumerate(cases)]
-    rows.append(cross_view_panels())
+    if args.figure == "whole_objects":
+        rows.append(cross_view_panels())
     figure, axes = plt.subplots(len(rows), 3, figsize=(9, 3 * len(rows)))
     for row, (title, rgb, old, new, truth) in zip(axes, rows):
         row[0].imshow(rgb)
@@ -97,7 +105,7 @@ def main() -> None:
             axis.axis("off")
     figure.suptitle("green: object kept, red: not the object, blue: object missed", fontsize=9)
     figure.tight_layout()
-    out = result_path("mask_quality", "whole_objects.png")
+    out = result_path("mask_quality", f"{args.figure}.png")
     figure.savefig(out, dpi=110)
     print(out)
 

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from idpose_core.segmentation.footprint import rests_on
-from idpose_core.segmentation.pieces import FOOT_PIXELS
+from idpose_core.segmentation.pieces import FOOT_PIXELS, MIN_PIECE_SHARE
 from idpose_core.segmentation.plane import Plane, depth_tolerance
 
 REST_TOLERANCE = 0.01  # m, or REST_TOLERANCE_SHARE of the depth when larger: an object resting on another's top has
@@ -33,6 +33,26 @@ def resting_top(upper: np.ndarray, carrier: np.ndarray, points: np.ndarray, heig
     if lowest < surface - tolerance or base.sum() < FOOT_PIXELS or not rests_on(points[base], points[carrier], plane):
         return None
     return surface + tolerance
+
+
+def split_at_raised_top(piece: np.ndarray, points: np.ndarray, height: np.ndarray, up: np.ndarray
+                        ) -> np.ndarray | None:
+    """(H, W) int: ``piece`` (H, W) bool cut at its raised top, 1 up to it and 2 above (0 elsewhere), or None: the
+    top is the height (``height`` (H, W), m above the plane) where most of the piece's readings that face up (``up``
+    (H, W)) lie, within ``REST_TOLERANCE``; both sides need ``MIN_PIECE_SHARE`` of the image. A box's top with
+    something on it, when no crease parts them (a stereo camera's noise folds a bumpy object all over)."""
+    readings = piece & up
+    least = MIN_PIECE_SHARE * piece.size
+    if readings.sum() < least:
+        return None
+    tolerance = float(depth_tolerance(np.median(points[readings][:, 2]), REST_TOLERANCE, REST_TOLERANCE_SHARE))
+    levels = np.floor(height[readings] / tolerance).astype(int)
+    values, counts = np.unique(levels, return_counts=True)
+    top = (values[np.argmax(counts)] + 1) * tolerance + tolerance  # the fullest band's upper edge, and the margin
+    above = piece & (height > top)
+    if above.sum() < least or (piece & ~above).sum() < least:
+        return None
+    return np.where(piece, np.where(above, 2, 1), 0)
 
 
 def lifted_off(upper: np.ndarray, carrier: np.ndarray, height: np.ndarray, top: float) -> np.ndarray:

@@ -11,7 +11,7 @@ from idpose_core.segmentation.colour import chromaticity, median_chromaticity, s
 from idpose_core.segmentation.normals import surface_normals
 from idpose_core.segmentation.pieces import MIN_PIECE_SHARE, border_labels, nearest_index, stands
 from idpose_core.segmentation.plane import Plane
-from idpose_core.segmentation.stacking import lifted_off, resting_top
+from idpose_core.segmentation.stacking import lifted_off, resting_top, split_at_raised_top
 
 CREASE_STEP = 4  # px either side of a reading: the two surface points a concave crease is judged between
 CREASE_NORMAL_STEP = 2  # px either side for their normals' finite differences
@@ -109,9 +109,13 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
         parts_count, parts = cv2.connectedComponents((inside & ~crease).astype(np.uint8), connectivity=4)
         areas = np.bincount(parts.ravel(), minlength=parts_count)
         large = [part for part in range(1, parts_count) if areas[part] >= MIN_PIECE_SHARE * labels.size]
-        if len(large) < 2:
-            continue
-        parts = _nearest_fill(_grown(np.where(np.isin(parts, large), parts, 0), inside), inside)
+        if len(large) >= 2:
+            parts = _nearest_fill(_grown(np.where(np.isin(parts, large), parts, 0), inside), inside)
+        else:  # creases everywhere (a stereo camera's noise on a bumpy object) or none: cut at a raised top, if any
+            parts = split_at_raised_top(inside, points, height, up & valid)
+            if parts is None:
+                continue
+            areas, large = np.bincount(parts.ravel(), minlength=3), [1, 2]
         alone = {part: stands(height[parts == part], footing[parts == part]) for part in large}
         colour = {part: median_chromaticity(chroma, parts == part) for part in large}
         group = {part: part for part in large}
