@@ -215,12 +215,14 @@ def main() -> None:
 
 
 def measured_code() -> str:
-    """The commit of the checkout measured (with "+changes" when its tracked files differ from it)."""
+    """The commit of the checkout measured (with "+changes" when its tracked files other than the results differ
+    from it: a run before this one has added to the summary)."""
     def git(*arguments: str) -> str:
         return subprocess.run(["git", *arguments], cwd=ROOT, capture_output=True, text=True).stdout.strip()
 
     commit = git("rev-parse", "--short", "HEAD") or "unknown"
-    return commit + ("+changes" if git("status", "--porcelain", "--untracked-files=no") else "")
+    changed = git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/results")
+    return commit + ("+changes" if changed else "")
 
 if __name__ == "__main__":
     main()
