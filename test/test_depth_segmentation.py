@@ -558,6 +558,7 @@ def test_an_object_on_a_box_of_its_own_size_is_cut_from_the_box(target, polar_de
     assert mask_iou(cut.mask, truth) > 0.95
     assert (cut.mask & ~truth).sum() < 0.02 * truth.sum(), "the box is not the object"
     assert cut.confidence > 0.9
+    assert "rests on another object" in cut.note
 
 
 def test_what_rests_on_the_target_stays_with_it_and_what_it_rests_on_does_not():

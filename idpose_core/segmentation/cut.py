@@ -47,7 +47,8 @@ FOOT_BAND = 0.01  # m above the height test's threshold: each of two parts kept 
 @dataclass(frozen=True)
 class DepthCut:
     """``mask`` (H, W) bool of the target; ``depth_mask`` before GrabCut; the support ``plane``; ``note``: what the
-    mask is unsure of (the central piece left out as the room, a piece touching the object left out), else empty;
+    mask left out that touches it or lies at the image centre (the central piece left out as the room, a piece
+    touching the object, the object it rests on), else empty;
     ``confidence`` in [0, 1]: how separable the object is from what was left out (``mask_confidence``)."""
 
     mask: np.ndarray
@@ -87,6 +88,8 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     if view.roi is None and nearer_the_centre(labels & (kept == 0), piece):
         notes.append("the piece nearest the image centre runs out of the image upwards and was left out as the room "
                      "(an object cut off at the image's top?)")
+    if support.any():
+        notes.append("the object rests on another object of another colour, which was left out as the table is")
     piece = close_holes(recover_base(piece, points, valid, height, plane, threshold, up), points, valid, height, plane,
                         threshold)
     mask = grabcut_refine(view.rgb, piece, on_plane, ~valid) if refine else piece
