@@ -1,5 +1,6 @@
-"""One object resting on another's top (a duck on a box, a block on a desk): two objects met at a crease, each
-of its own colour. The target keeps what rests on it and leaves out what it rests on, as it leaves out the table."""
+"""One object resting on another's top (a duck on a box, a block on a desk): two objects of two colours, met at a
+crease, apart in depth, or at the carrier's raised top. The target keeps what rests on it and leaves out what it rests
+on, as it leaves out the table."""
 from __future__ import annotations
 
 import cv2
@@ -18,13 +19,17 @@ TOP_REACH = 8  # px: the carrier's top shows this close to what rests on it
 def resting_top(upper: np.ndarray, carrier: np.ndarray, points: np.ndarray, height: np.ndarray, up: np.ndarray,
                 plane: Plane) -> float | None:
     """The height (m above the plane, with ``REST_TOLERANCE``) of the top of the part ``carrier`` (H, W) bool that
-    the part ``upper`` (H, W) bool rests on, or None when it does not: at least ``FOOT_PIXELS`` of the carrier's
-    readings within ``reach`` (a structuring element) of the upper part face up (``up`` (H, W): its top), the upper
-    part's lowest readings (5th percentile of ``height`` (H, W)) lie no lower than ``REST_TOLERANCE`` under that top,
-    and it lies over the carrier's footprint (``rests_on``)."""
+    the part ``upper`` (H, W) bool rests on, or None when it does not: the carrier has at least as many readings as
+    the upper part (a flat base of another colour under a toy is not a box it stands on); at least ``FOOT_PIXELS`` of
+    its readings within ``TOP_REACH`` px of the upper part face up (``up`` (H, W)); the upper part's lowest readings
+    (5th percentile of ``height`` (H, W)) lie no lower than ``REST_TOLERANCE`` under the carrier's top (the median
+    height of its readings that face up); and the upper part's base (its readings within twice that of its lowest)
+    lies over the carrier's footprint (``rests_on``; the carrier's top is hidden behind what rests on it, its sides
+    are not)."""
     top = carrier & up
     reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * TOP_REACH + 1,) * 2)
-    if (cv2.dilate(upper.astype(np.uint8), reach).astype(bool) & top).sum() < FOOT_PIXELS:
+    near_top = cv2.dilate(upper.astype(np.uint8), reach).astype(bool) & top
+    if carrier.sum() < upper.sum() or near_top.sum() < FOOT_PIXELS:
         return None
     surface = float(np.median(height[top]))  # the whole top: what faces up near the upper part may be its own lap
     tolerance = float(depth_tolerance(np.median(points[top][:, 2]), REST_TOLERANCE, REST_TOLERANCE_SHARE))

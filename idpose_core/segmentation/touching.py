@@ -92,7 +92,9 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
     the other rests on its top (``resting_top``: a duck on a box, a block on a desk; ``valid`` (H, W): the readings,
     ``up`` (H, W): those that face up, ``faces_up`` on the support ``plane``; what of the carrier stands above its
     top goes to the part resting there, ``lifted_off``). Otherwise they join again: a duck's head and body (one
-    stands), a marker on a ball, a table's legs and top (too thin to be a large part). A piece that runs out of the
+    stands), a marker on a ball, a table's legs and top (too thin to be a large part). A piece its creases do not cut
+    into two large parts is cut at its raised top instead (``split_at_raised_top``) and judged the same way. A
+    piece that runs out of the
     image is left whole: what lies beyond cannot be judged (a wall behind the table, its tiles in different
     colours)."""
     crease = cv2.dilate(concave_creases(points, labels).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
