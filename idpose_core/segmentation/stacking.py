@@ -19,17 +19,15 @@ TOP_REACH = 8  # px: the carrier's top shows this close to what rests on it
 def resting_top(upper: np.ndarray, carrier: np.ndarray, points: np.ndarray, height: np.ndarray, up: np.ndarray,
                 plane: Plane) -> float | None:
     """The height (m above the plane, with ``REST_TOLERANCE``) of the top of the part ``carrier`` (H, W) bool that
-    the part ``upper`` (H, W) bool rests on, or None when it does not: the carrier has at least as many readings as
-    the upper part (a flat base of another colour under a toy is not a box it stands on); at least ``FOOT_PIXELS`` of
-    its readings within ``TOP_REACH`` px of the upper part face up (``up`` (H, W)); the upper part's lowest readings
+    the part ``upper`` (H, W) bool rests on, or None when it does not: at least ``FOOT_PIXELS`` of the carrier's
+    readings within ``TOP_REACH`` px of the upper part face up (``up`` (H, W)); the upper part's lowest readings
     (5th percentile of ``height`` (H, W)) lie no lower than ``REST_TOLERANCE`` under the carrier's top (the median
     height of its readings that face up); and the upper part's base (its readings within twice that of its lowest)
     lies over the carrier's footprint (``rests_on``; the carrier's top is hidden behind what rests on it, its sides
     are not)."""
     top = carrier & up
     reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * TOP_REACH + 1,) * 2)
-    near_top = cv2.dilate(upper.astype(np.uint8), reach).astype(bool) & top
-    if carrier.sum() < upper.sum() or near_top.sum() < FOOT_PIXELS:
+    if (cv2.dilate(upper.astype(np.uint8), reach).astype(bool) & top).sum() < FOOT_PIXELS:
         return None
     surface = float(np.median(height[top]))  # the whole top: what faces up near the upper part may be its own lap
     tolerance = float(depth_tolerance(np.median(points[top][:, 2]), REST_TOLERANCE, REST_TOLERANCE_SHARE))
@@ -44,8 +42,10 @@ def split_at_raised_top(piece: np.ndarray, points: np.ndarray, height: np.ndarra
                         ) -> np.ndarray | None:
     """(H, W) int: ``piece`` (H, W) bool cut at its raised top, 1 up to it and 2 above (0 elsewhere), or None: the
     top is the height (``height`` (H, W), m above the plane) where most of the piece's readings that face up (``up``
-    (H, W)) lie, within ``REST_TOLERANCE``; both sides need ``MIN_PIECE_SHARE`` of the image. A box's top with
-    something on it, when no crease parts them (a stereo camera's noise folds a bumpy object all over)."""
+    (H, W)) lie, within ``REST_TOLERANCE``; both sides need ``MIN_PIECE_SHARE`` of the image, and with no crease to
+    say where one object ends, the side below at least as many pixels as the side above (a box shows no less of
+    itself than what stands on it; a toy's flat base of another colour does). A box's top with something on it, when
+    no crease parts them (a stereo camera's noise folds a bumpy object all over)."""
     readings = piece & up
     least = MIN_PIECE_SHARE * piece.size
     if readings.sum() < least:
@@ -55,7 +55,7 @@ def split_at_raised_top(piece: np.ndarray, points: np.ndarray, height: np.ndarra
     values, counts = np.unique(levels, return_counts=True)
     top = (values[np.argmax(counts)] + 1) * tolerance + tolerance  # the fullest band's upper edge, and the margin
     above = piece & (height > top)
-    if above.sum() < least or (piece & ~above).sum() < least:
+    if above.sum() < least or (piece & ~above).sum() < max(least, above.sum()):
         return None
     return np.where(piece, np.where(above, 2, 1), 0)
 
