@@ -79,7 +79,7 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     resting = [(labels == upper, labels == carrier) for upper, carrier in stacked]
     labels, resting_apart = merge_carried_pieces(labels, count, known_height, points, valid,
                                                  depth_tolerance(depth, SUPPORT_HEIGHT, 0.05), plane, view.rgb, up,
-                                                 apart)
+                                                 apart, stacked)
     resting += resting_apart
     on_plane = valid & (np.abs(height) < depth_tolerance(depth, PLANE_TOLERANCE, 0.01))
     kept = drop_scenery(labels, count, known_height, plane)

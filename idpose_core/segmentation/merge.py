@@ -88,7 +88,8 @@ def _whole_of(piece: int, inside: np.ndarray, labels: np.ndarray, areas: np.ndar
 
 def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, points: np.ndarray,
                          valid: np.ndarray, support: np.ndarray, plane: Plane, rgb: np.ndarray, up: np.ndarray,
-                         apart: frozenset[tuple[int, int]] = frozenset()
+                         apart: frozenset[tuple[int, int]] = frozenset(),
+                         resting: frozenset[tuple[int, int]] = frozenset()
                          ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
     """(the labels, the pixels (H, W) bool of each piece kept apart from the piece whose top it rests on paired with
     that piece's) with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
@@ -101,13 +102,14 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     partly hidden by the target), and so does one that is well in front of it (a ball whose lowest visible points
     are high on its curve, before a box behind it). A piece that rests on the top of a standing piece of another
     colour (``resting_top``; ``up`` (H, W): the readings that face up) is another object, never joined to it (a duck
-    on a box, apart from it in depth). Pieces that ``apart`` pairs (``split_touching``: two objects) never join, nor
-    do the pieces they have joined."""
+    on a box, apart from it in depth): it stands on that top, as the upper pieces of ``resting`` pairs (upper,
+    carrier) do, and is nobody's part (not the wall's behind it). Pieces that ``apart`` pairs (``split_touching``:
+    two objects) never join, nor do the pieces they have joined."""
     labels = labels.copy()
     chroma = chromaticity(rgb)
     owner = np.arange(count)  # the piece each original piece has joined
     kept_apart = set(apart)
-    resting: list[tuple[np.ndarray, np.ndarray]] = []
+    found: list[tuple[np.ndarray, np.ndarray]] = []
 
     def may_join(piece: int, other: int) -> bool:
         return not any({owner[first], owner[second]} == {piece, other} for first, second in kept_apart)
@@ -122,7 +124,8 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
         if resting_top(upper_pixels & valid, carrier_pixels & valid, points, height, up, plane) is None:
             return False
         kept_apart.add((upper, carrier))
-        resting.append((upper_pixels, carrier_pixels))
+        found.append((upper_pixels, carrier_pixels))
+        standing[upper] = True  # on the carrier's top
         return True
 
     kernel = np.ones((3, 3), np.uint8)
@@ -131,6 +134,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     for piece in np.flatnonzero(areas):
         inside = labels == piece
         standing[piece] = stands(height[inside], support[inside])
+    standing[[upper for upper, _ in resting]] = True  # on a carrier's top
     for piece in np.argsort(areas)[::-1]:  # what stands beneath a piece, smaller than it, joins it (its legs)
         if piece == 0 or areas[piece] == 0:
             continue
@@ -151,12 +155,12 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
                 continue
             inside = labels == piece
             best = _whole_of(piece, inside, labels, areas, standing, points, valid, plane, chroma, may_join)
-            while best and rests_apart(piece, best):  # a duck on a box: not a part of it, maybe of another
-                best = _whole_of(piece, inside, labels, areas, standing, points, valid, plane, chroma, may_join)
+            if best and rests_apart(piece, best):  # a duck on a box: its own object, nobody's part
+                continue
             if best:
                 labels[inside] = best
                 owner[owner == piece] = best
                 areas[best] += areas[piece]
                 areas[piece] = 0
                 joined = True
-    return labels, resting
+    return labels, found
