@@ -76,11 +76,9 @@ def depth_cut(view: ViewInput, refine: bool = True, seed: int = 0) -> DepthCut:
     up = faces_up(points, valid, plane)
     count, labels, apart, stacked = split_touching(labels, count, points, known_height, threshold + FOOT_BAND,
                                                    view.rgb, valid, up, plane)
-    resting = [(labels == upper, labels == carrier) for upper, carrier in stacked]
-    labels, resting_apart = merge_carried_pieces(labels, count, known_height, points, valid,
-                                                 depth_tolerance(depth, SUPPORT_HEIGHT, 0.05), plane, view.rgb, up,
-                                                 apart, stacked)
-    resting += resting_apart
+    labels, resting = merge_carried_pieces(labels, count, known_height, points, valid,
+                                           depth_tolerance(depth, SUPPORT_HEIGHT, 0.05), plane, view.rgb, up, apart,
+                                           stacked)
     on_plane = valid & (np.abs(height) < depth_tolerance(depth, PLANE_TOLERANCE, 0.01))
     kept = drop_scenery(labels, count, known_height, plane)
     piece, support = with_what_it_carries(target_piece(kept, count, view.roi), labels, resting, view.roi)

@@ -91,12 +91,12 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
                          apart: frozenset[tuple[int, int]] = frozenset(),
                          resting: frozenset[tuple[int, int]] = frozenset()
                          ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
-    """(the labels, the pixels (H, W) bool of each piece kept apart from the piece whose top it rests on paired with
-    that piece's) with every piece joined by the smaller ones that carry it from beneath (``_carriers_beneath``: a
-    table top and its legs), then every piece that still does not reach the plane (``stands``: too few of its
-    points within ``support`` (H, W), m) joined to the neighbouring piece it is a part of (``_whole_of``: it stands
-    out in front of it, or rests on it or continues its colour behind it, attached; ``rgb`` (H, W, 3)), until none
-    joins: a part of an object that a depth jump cut off
+    """(the labels, the pixels (H, W) bool of each piece that rests on another's top paired with that other's: the
+    ``resting`` pairs given and those found here, as they were when kept apart) with every piece joined by the
+    smaller ones that carry it from beneath (``_carriers_beneath``: a table top and its legs), then every piece that
+    still does not reach the plane (``stands``: too few of its points within ``support`` (H, W), m) joined to the
+    neighbouring piece it is a part of (``_whole_of``: it stands out in front of it, or rests on it or continues its
+    colour behind it, attached; ``rgb`` (H, W, 3)), until none joins: a part of an object that a depth jump cut off
     (a duck's head and back, larger than the breast below them; a brick's studs seen from level, behind its front
     face, and the marker on them). A piece behind its neighbour and beyond its footprint stays apart (an object
     partly hidden by the target), and so does one that is well in front of it (a ball whose lowest visible points
@@ -109,7 +109,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
     chroma = chromaticity(rgb)
     owner = np.arange(count)  # the piece each original piece has joined
     kept_apart = set(apart)
-    found: list[tuple[np.ndarray, np.ndarray]] = []
+    found = [(labels == upper, labels == carrier) for upper, carrier in resting]
 
     def may_join(piece: int, other: int) -> bool:
         return not any({owner[first], owner[second]} == {piece, other} for first, second in kept_apart)
@@ -155,9 +155,7 @@ def merge_carried_pieces(labels: np.ndarray, count: int, height: np.ndarray, poi
                 continue
             inside = labels == piece
             best = _whole_of(piece, inside, labels, areas, standing, points, valid, plane, chroma, may_join)
-            if best and rests_apart(piece, best):  # a duck on a box: its own object, nobody's part
-                continue
-            if best:
+            if best and not rests_apart(piece, best):  # a duck on a box is its own object, nobody's part
                 labels[inside] = best
                 owner[owner == piece] = best
                 areas[best] += areas[piece]

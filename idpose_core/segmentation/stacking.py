@@ -86,15 +86,14 @@ def with_what_it_carries(piece: np.ndarray, labels: np.ndarray, resting: list[tu
     interest (``roi``) a view the centre rule gave to what rests on the carrier goes to the carrier when it is about
     it (``about_the_carrier``)."""
     label = int(labels[piece][0])
-    for upper, carrier in resting:
-        upper_label, carrier_label = int(labels[upper][0]), int(labels[carrier][0])
+    pairs = [(int(labels[upper][0]), int(labels[carrier][0])) for upper, carrier in resting]  # their labels now
+    for upper_label, carrier_label in pairs:
         if roi is None and upper_label == label != carrier_label and about_the_carrier(
                 labels == upper_label, labels == carrier_label):
             label = carrier_label
     piece = labels == label
     support = np.zeros_like(piece)
-    for upper, carrier in resting:
-        upper_label, carrier_label = int(labels[upper][0]), int(labels[carrier][0])
+    for upper_label, carrier_label in pairs:
         if carrier_label == label != upper_label:
             piece = piece | (labels == upper_label)
         elif upper_label == label != carrier_label:

@@ -93,10 +93,9 @@ def split_touching(labels: np.ndarray, count: int, points: np.ndarray, height: n
     ``up`` (H, W): those that face up, ``faces_up`` on the support ``plane``; what of the carrier stands above its
     top goes to the part resting there, ``lifted_off``). Otherwise they join again: a duck's head and body (one
     stands), a marker on a ball, a table's legs and top (too thin to be a large part). A piece its creases do not cut
-    into two large parts is cut at its raised top instead (``split_at_raised_top``) and judged the same way. A
-    piece that runs out of the
-    image is left whole: what lies beyond cannot be judged (a wall behind the table, its tiles in different
-    colours)."""
+    into two large parts is cut at its raised top instead (``split_at_raised_top``) and judged the same way. A piece
+    that runs out of the image is left whole: what lies beyond cannot be judged (a wall behind the table, its tiles
+    in different colours)."""
     crease = cv2.dilate(concave_creases(points, labels).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     crease |= (labels > 0) & ~_opened(labels)  # a cut with no gaps, and the thin necks where two objects meet
     cut_pairs: set[tuple[int, int]] = set()
